@@ -23,6 +23,7 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
+            'fk = robotenis_kinematics.fk_cli:main',
         ],
     },
 )

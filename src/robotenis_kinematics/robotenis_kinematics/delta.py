@@ -143,14 +143,19 @@ def inverse_jacobian(desc, P, theta=None):
 
 
 def singularity_distance(desc, P):
-    """Distance (m) from P to the nearest serial singularity: a leg fully stretched or folded.
+    """Distance (m) from P to the nearest serial singularity: a leg fully stretched or folded (...,)."""
+    return np.min(leg_singularity_margins(desc, P), axis=-1)
+
+
+def leg_singularity_margins(desc, P):
+    """Per leg, the distance (m) of C_i to the boundary of leg i's workspace, shape (..., 3).
 
     C_i is reachable by leg i while the circle its elbow B_i can describe (centre A_i, radius a_i,
     in the vertical plane of the leg) has points both nearer and farther than b_i. With rho the
     in-plane distance of C_i from A_i and v its distance from that plane, the nearest and farthest
     circle points are at d_min = hypot(rho - a, v) and d_max = hypot(rho + a, v); both are distance
     functions, so min(b - d_min, d_max - b) is the metric distance of C_i to the boundary of leg i's
-    workspace. Negative outside the workspace. Shape (...,).
+    workspace. Negative outside it.
     """
     C = effector_joints(desc, P)
     e = leg_directions(desc)
@@ -159,7 +164,7 @@ def singularity_distance(desc, P):
     rho = np.hypot(u, C[..., 2])
     d_min = np.hypot(rho - desc.a, v)
     d_max = np.hypot(rho + desc.a, v)
-    return np.min(np.minimum(desc.b - d_min, d_max - desc.b), axis=-1)
+    return np.minimum(desc.b - d_min, d_max - desc.b)
 
 
 def parallel_conditioning(desc, P, theta=None):

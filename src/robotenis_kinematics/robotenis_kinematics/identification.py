@@ -1,0 +1,288 @@
+"""Identification of the Delta robot's geometry from incremental measurements (paper, eqs. 3-8).
+
+Each pose k gives the resolver increments Theta_k (rad) and the incremental effector position
+Pi_k = P_k - P0 (m, base frame) measured by the hand camera (eq. 3). With theta_ik = theta_i0 + Theta_ik
+the loop-closure equations of the three legs are (eq. 4)
+
+    Gamma_ik = |P0 + Pi_k + h_i e_i - (H_i + a_i cos theta_ik) e_i - a_i sin theta_ik z|^2 - b_i^2 = 0,
+
+stacked leg by leg into Phi(U, V) (eq. 5). The paper's unknowns are U = [u_1 u_2 u_3 P0] with
+u_i = [a_i b_i h_i theta_i0] (15 parameters); H_i and phi_i can be added for the observability study.
+
+Estimator
+---------
+Both the resolvers and the camera are noisy, so this is an errors-in-variables problem. We use
+weighted least squares with propagated noise (the *effective variance* estimator): each pose's three
+residuals Gamma_k get the covariance G_k Sigma_Vk G_k^T, with G_k = dGamma_k / dV_k the derivative
+with respect to that pose's measurements V_k = [Theta_k, Pi_k], and are whitened by its Cholesky
+factor. To first order in the noise this is the Gauss-Helmert maximum-likelihood estimator (it
+minimises the same Mahalanobis distance after eliminating the corrections to V_k) at a fraction of
+the cost, and its chi-square sum_k Gamma_k^T (G Sigma G^T)^-1 Gamma_k follows chi2(3K - p) when the
+model is right -- the statistic the residual loop tests. The covariance of U is (J_w^T J_w)^-1 with
+J_w the whitened observation matrix; evaluated at the true parameters it is the Cramer-Rao bound.
+"""
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from robotenis_kinematics import delta
+
+LEG_PARAMETERS = ('a', 'b', 'h', 'H', 'phi', 'theta0')
+PAPER_PARAMETERS = tuple(f'{p}{i}' for i in (1, 2, 3) for p in ('a', 'b', 'h', 'theta0')) + ('P0x', 'P0y', 'P0z')
+ALL_PARAMETERS = tuple(f'{p}{i}' for i in (1, 2, 3) for p in LEG_PARAMETERS) + ('P0x', 'P0y', 'P0z')
+_Z = np.array([0.0, 0.0, 1.0])
+
+
+@dataclass
+class Measurements:
+    """Incremental measurements of K poses and their noise.
+
+    Theta : (K, 3) resolver increments from home, rad.
+    Pi : (K, 3) incremental effector positions in the base frame, m.
+    sigma_Theta : (3,) or (K, 3) standard deviation of each resolver increment, rad.
+    cov_Pi : (3, 3) or (K, 3, 3) covariance of each Pi_k, m^2.
+    """
+
+    Theta: np.ndarray
+    Pi: np.ndarray
+    sigma_Theta: np.ndarray
+    cov_Pi: np.ndarray
+
+    def __post_init__(self):
+        self.Theta = np.asarray(self.Theta, dtype=float)
+        self.Pi = np.asarray(self.Pi, dtype=float)
+        K = len(self.Theta)
+        if self.Theta.shape != (K, 3) or self.Pi.shape != (K, 3):
+            raise ValueError(f"Theta and Pi must both be (K, 3); got {self.Theta.shape} and {self.Pi.shape}")
+        if not (np.all(np.isfinite(self.Theta)) and np.all(np.isfinite(self.Pi))):
+            raise ValueError("measurements contain NaN or infinite values")
+        self.sigma_Theta = np.broadcast_to(np.asarray(self.sigma_Theta, dtype=float), (K, 3))
+        self.cov_Pi = np.broadcast_to(np.asarray(self.cov_Pi, dtype=float), (K, 3, 3))
+
+    def __len__(self):
+        return len(self.Theta)
+
+    def subset(self, index):
+        """The measurements of the poses selected by ``index``."""
+        return Measurements(self.Theta[index], self.Pi[index], self.sigma_Theta[index], self.cov_Pi[index])
+
+
+@dataclass
+class Model:
+    """A point in parameter space: a robot description and the camera reference position P0."""
+
+    desc: object
+    P0: np.ndarray
+
+    def get(self, names):
+        """Parameter vector U for the given parameter names (e.g. PAPER_PARAMETERS)."""
+        return np.array([_get(self, n) for n in names])
+
+    def with_values(self, names, U):
+        """A new Model with the named parameters set to U."""
+        desc = self.desc.copy()
+        P0 = np.array(self.P0, dtype=float)
+        for n, u in zip(names, U):
+            if n.startswith('P0'):
+                P0['xyz'.index(n[2])] = u
+            else:
+                getattr(desc, n[:-1])[int(n[-1]) - 1] = u
+        return Model(desc, P0)
+
+
+def _get(model, name):
+    if name.startswith('P0'):
+        return model.P0['xyz'.index(name[2])]
+    return getattr(model.desc, name[:-1])[int(name[-1]) - 1]
+
+
+def _leg_geometry(desc, P0, Theta, Pi):
+    """d_ik = C_ik - B_ik (K, 3, 3), theta_ik (K, 3), e_i and de_i/dphi_i (3, 3)."""
+    theta = desc.theta0 + Theta
+    d = delta.effector_joints(desc, P0 + Pi) - delta.elbow_points(desc, theta)
+    e = delta.leg_directions(desc)
+    de = np.stack([-e[:, 1], e[:, 0], np.zeros(3)], axis=-1)
+    return d, theta, e, de
+
+
+def constraints(model, meas):
+    """Gamma_ik (K, 3) of eq. (4); zero for exact measurements of the true model."""
+    d, _, _, _ = _leg_geometry(model.desc, model.P0, meas.Theta, meas.Pi)
+    return np.einsum('kij,kij->ki', d, d) - model.desc.b ** 2
+
+
+def partials(model, meas):
+    """Derivatives of Gamma_ik, each (K, 3): with respect to leg i's own parameters
+    ('a', 'b', 'h', 'H', 'phi', 'theta0'), to the joint angle ('theta', equal to 'theta0'), and to
+    P0 = Pi ('P', shape (K, 3, 3): dGamma_ik / dP_j)."""
+    desc = model.desc
+    d, theta, e, de = _leg_geometry(desc, model.P0, meas.Theta, meas.Pi)
+    d_e = np.einsum('kij,ij->ki', d, e)
+    d_de = np.einsum('kij,ij->ki', d, de)
+    d_z = d[..., 2]
+    c, s = np.cos(theta), np.sin(theta)
+    dtheta = 2 * desc.a * (s * d_e - c * d_z)
+    return {
+        'a': -2 * (c * d_e + s * d_z),
+        'b': np.broadcast_to(-2 * desc.b, d_e.shape),
+        'h': 2 * d_e,
+        'H': -2 * d_e,
+        'phi': 2 * (desc.h - desc.H - desc.a * c) * d_de,
+        'theta0': dtheta,
+        'theta': dtheta,
+        'P': 2 * d,
+    }
+
+
+def observation_matrix(model, meas, names=PAPER_PARAMETERS, parts=None):
+    """The observation matrix J = dPhi/dU (3K, p) of eq. (7), rows ordered leg by leg as in eq. (5)."""
+    parts = partials(model, meas) if parts is None else parts
+    K = len(meas)
+    J = np.zeros((3, K, len(names)))
+    for col, n in enumerate(names):
+        if n.startswith('P0'):
+            J[:, :, col] = parts['P'][:, :, 'xyz'.index(n[2])].T
+        else:
+            i = int(n[-1]) - 1
+            J[i, :, col] = parts[n[:-1]][:, i]
+    return J.reshape(3 * K, len(names))
+
+
+def residual_covariance(meas, parts):
+    """Covariance (K, 3, 3) of Gamma_k propagated from the noise of V_k = [Theta_k, Pi_k]."""
+    g_theta = parts['theta'] * meas.sigma_Theta
+    D = parts['P']
+    return np.einsum('ki,ij->kij', g_theta ** 2, np.eye(3)) + np.einsum('kia,kab,kjb->kij', D, meas.cov_Pi, D)
+
+
+def whitening(meas, parts):
+    """Lower-triangular L_k^-1 (K, 3, 3) with L_k L_k^T the covariance of Gamma_k."""
+    L = np.linalg.cholesky(residual_covariance(meas, parts))
+    return np.linalg.inv(L)
+
+
+def _stack_legs(x):
+    """(K, 3, ...) per-pose arrays to the leg-major stacking of eq. (5)."""
+    return np.swapaxes(x, 0, 1).reshape(-1, *x.shape[2:])
+
+
+def whitened_problem(model, meas, names):
+    """Whitened residuals r_w (3K,) and Jacobian J_w (3K, p), stacked pose by pose."""
+    parts = partials(model, meas)
+    W = whitening(meas, parts)
+    Gamma = constraints(model, meas)
+    J = observation_matrix(model, meas, names, parts)
+    K = len(meas)
+    J_pose = J.reshape(3, K, -1).transpose(1, 0, 2)
+    r_w = np.einsum('kij,kj->ki', W, Gamma).reshape(-1)
+    J_w = np.einsum('kij,kjp->kip', W, J_pose).reshape(3 * K, -1)
+    return r_w, J_w
+
+
+@dataclass
+class Result:
+    """An identified model with its statistics."""
+
+    model: Model
+    names: tuple
+    U: np.ndarray
+    covariance: np.ndarray
+    chi2: float
+    dof: int
+    iterations: int
+    converged: bool
+    history: list = field(default_factory=list)
+
+    @property
+    def std(self):
+        """Standard deviations of U (same order as names)."""
+        return np.sqrt(np.diag(self.covariance))
+
+
+def initial_model(desc, meas):
+    """The paper's start U_0: nominal parameters and P0 from a nominal pose.
+
+    P0 = mean_k (FK_nominal(theta0 + Theta_k) - Pi_k): every pose predicts the camera reference.
+    """
+    P = delta.forward(desc, desc.theta0 + meas.Theta)
+    return Model(desc.copy(), np.mean(P - meas.Pi, axis=0))
+
+
+def gauss_newton_paper(start, meas, names=PAPER_PARAMETERS, max_iterations=50, tol=1e-12):
+    """The paper's iteration U_(n+1) = U_n - J(U_n)^+ Phi(U_n) (eqs. 6-8), unweighted, pseudo-inverse.
+
+    Returns the Result; its covariance assumes unit-variance Gamma (the paper weights nothing).
+    """
+    model, U = start, start.get(names)
+    history = []
+    for n in range(1, max_iterations + 1):
+        Phi = _stack_legs(constraints(model, meas))
+        J = observation_matrix(model, meas, names)
+        step = np.linalg.pinv(J) @ Phi
+        U = U - step
+        model = model.with_values(names, U)
+        history.append(float(Phi @ Phi))
+        if np.max(np.abs(step)) < tol:
+            break
+    J = observation_matrix(model, meas, names)
+    Phi = _stack_legs(constraints(model, meas))
+    cov = np.linalg.pinv(J.T @ J)
+    return Result(model, tuple(names), U, cov, float(Phi @ Phi), 3 * len(meas) - len(names), n,
+                  np.max(np.abs(step)) < tol, history)
+
+
+def identify(start, meas, names=PAPER_PARAMETERS, max_iterations=100, tol=1e-12, callback=None):
+    """Damped Gauss-Newton (Levenberg-Marquardt) on the whitened constraints; the default solver.
+
+    Minimises chi2(U) = sum_k Gamma_k^T (G_k Sigma_k G_k^T)^-1 Gamma_k (effective variance; see the
+    module docstring). The weights are re-evaluated at every accepted step. Stops when the step is
+    below ``tol`` relative to the parameter scale or chi2 stops decreasing.
+
+    Returns
+    -------
+    Result
+        with the covariance (J_w^T J_w)^-1 at the solution and chi2 with dof = 3K - p.
+    """
+    names = tuple(names)
+    model, U = start, start.get(names)
+    r, J = whitened_problem(model, meas, names)
+    cost = r @ r
+    lam = 1e-3
+    history = [float(cost)]
+    converged = False
+    for n in range(1, max_iterations + 1):
+        JtJ, Jtr = J.T @ J, J.T @ r
+        scale = np.sqrt(np.maximum(np.diag(JtJ), 1e-300))
+        A = JtJ / np.outer(scale, scale)
+        g = Jtr / scale
+        while True:
+            step = -np.linalg.solve(A + lam * np.eye(len(U)), g) / scale
+            trial = model.with_values(names, U + step)
+            r_t, J_t = whitened_problem(trial, meas, names)
+            cost_t = r_t @ r_t
+            if cost_t <= cost:
+                break
+            lam *= 10
+            if lam > 1e12:
+                break
+        if cost_t > cost:
+            converged = True  # no downhill step left: at the minimum to machine precision
+            break
+        small = np.all(np.abs(step) <= tol * (1 + np.abs(U)))
+        flat = cost - cost_t <= 1e-15 * max(cost, 1e-300)
+        U, model, r, J, cost = U + step, trial, r_t, J_t, cost_t
+        lam = max(lam / 10, 1e-12)
+        history.append(float(cost))
+        if callback is not None:
+            callback(n, cost)
+        if small or flat:
+            converged = True
+            break
+    cov = np.linalg.inv(J.T @ J)
+    return Result(model, names, U, cov, float(cost), 3 * len(meas) - len(names), n, converged, history)
+
+
+def cramer_rao(true_model, meas, names=PAPER_PARAMETERS):
+    """Cramer-Rao bound (J_w^T J_w)^-1 of the parameters at the true model for this pose design."""
+    _, J_w = whitened_problem(true_model, meas, names)
+    return np.linalg.inv(J_w.T @ J_w)

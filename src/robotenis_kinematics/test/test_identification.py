@@ -1,0 +1,82 @@
+import numpy as np
+import pytest
+from scipy import stats
+
+from robotenis_kinematics import identification as idf
+from robotenis_kinematics import observability, synthetic, workspace
+
+LEVEL = 0.01  # two-sided significance of the chi-square tests
+
+
+@pytest.fixture
+def design(nominal):
+    """300 of the paper's calibration poses, 5-10 cm from a singularity."""
+    return workspace.boundary_poses(nominal, 300, np.random.default_rng(11))
+
+
+def test_observation_matrix_matches_finite_differences(table1, design):
+    model = synthetic.true_model(table1)
+    meas = synthetic.measure(table1, design[:40])
+    model = model.with_values(('b1', 'P0x'), model.get(('b1', 'P0x')) + 1e-3)  # off the solution
+    names = idf.ALL_PARAMETERS
+    J = idf.observation_matrix(model, meas, names)
+    U = model.get(names)
+    for j, name in enumerate(names):
+        h = 1e-6
+        plus = idf.constraints(model.with_values(names, U + h * np.eye(len(U))[j]), meas)
+        minus = idf.constraints(model.with_values(names, U - h * np.eye(len(U))[j]), meas)
+        numeric = np.swapaxes((plus - minus) / (2 * h), 0, 1).reshape(-1)
+        assert np.abs(J[:, j] - numeric).max() < 1e-8, name
+
+
+def test_noise_free_data_are_recovered(nominal, table1, design):
+    meas = synthetic.measure(table1, design)
+    truth = synthetic.true_model(table1).get(idf.PAPER_PARAMETERS)
+    start = idf.initial_model(nominal, meas)
+    for solve in (idf.identify, idf.gauss_newton_paper):
+        result = solve(start, meas)
+        assert result.converged
+        assert np.abs(result.U - truth).max() < 1e-9, solve.__name__
+
+
+def test_errors_agree_with_the_covariance_over_50_seeds(nominal, table1, design):
+    """Sum over seeds of e^T Cov^-1 e ~ chi2(50 * 15); residual chi2 ~ chi2(50 * (3K - 15))."""
+    truth_model = synthetic.true_model(table1)
+    truth = truth_model.get(idf.PAPER_PARAMETERS)
+    mahalanobis = residual = dof = 0.0
+    seeds = 50
+    for seed in range(seeds):
+        meas = synthetic.measure(table1, design, rng=np.random.default_rng(1000 + seed))
+        result = idf.identify(idf.initial_model(nominal, meas), meas)
+        e = result.U - truth
+        mahalanobis += e @ np.linalg.solve(result.covariance, e)
+        residual += result.chi2
+        dof += result.dof
+    n = seeds * len(truth)
+    assert stats.chi2.ppf(LEVEL / 2, n) < mahalanobis < stats.chi2.ppf(1 - LEVEL / 2, n)
+    assert stats.chi2.ppf(LEVEL / 2, dof) < residual < stats.chi2.ppf(1 - LEVEL / 2, dof)
+
+
+def test_covariance_at_the_truth_is_the_cramer_rao_bound(nominal, table1, design):
+    meas = synthetic.measure(table1, design, rng=np.random.default_rng(5))
+    result = idf.identify(idf.initial_model(nominal, meas), meas)
+    crb = idf.cramer_rao(synthetic.true_model(table1), meas)
+    # The estimate's covariance is evaluated at the estimate, a few CRB std away: equal to first order.
+    np.testing.assert_allclose(np.sqrt(np.diag(result.covariance)), np.sqrt(np.diag(crb)), rtol=1e-3)
+
+
+def test_observability_finds_H_minus_h_and_weak_phi(table1, design):
+    obs = observability.analyse(synthetic.true_model(table1), synthetic.measure(table1, design))
+    assert obs.rank == len(idf.ALL_PARAMETERS) - 3
+    pairs = sorted(tuple(sorted(c)) for c in obs.combinations)
+    assert pairs == [('H1', 'h1'), ('H2', 'h2'), ('H3', 'h3')]
+    assert all(np.isclose(c[a], c[b]) for c in obs.combinations for a, b in [tuple(c)])
+    assert set(obs.weak) == {'phi1', 'phi2', 'phi3'}
+    assert 'H1 - h1' in observability.format_report(obs)
+
+
+def test_bad_measurements_are_refused():
+    with pytest.raises(ValueError, match='NaN'):
+        idf.Measurements([[0.0, np.nan, 0.0]], [[0.0, 0.0, 0.0]], 1e-5, np.eye(3))
+    with pytest.raises(ValueError, match=r'\(K, 3\)'):
+        idf.Measurements(np.zeros((4, 3)), np.zeros((3, 3)), 1e-5, np.eye(3))

@@ -1,0 +1,173 @@
+"""The simulator's truth: the real geometry and the effects no robot description declares.
+
+Read by the simulator only. A truth file is YAML::
+
+    geometry: {legs: ..., camera: ..., sphere_radius: ...}   # robot description schema: the TRUE geometry
+    camera_translation: [0.12, 0.0, 0.04]   # optical centre in the effector frame, m
+    sphere_position: [0.55, 0.0, 0.95]      # centre of the fixed calibration ball, base frame, m
+    effects:                                 # all optional, none on by default
+      joint_scale: [s1, s2, s3]              # gear ratio error: reading = (1 + s_i) (motor - theta0)
+      backlash: [w1, w2, w3]                 # rad: the arm lags the motor by w_i / 2 against the last motion
+      gravity_compliance: [c1, c2, c3]       # rad/(N m): the arm sags by c_i tau_g,i under gravity torque
+      base_geometry: {dH: [...], dphi: [...]}  # m, rad: motor axes off the declared H_i, phi_i
+      hand_eye_rotation: [rx, ry, rz]        # rad, rotation vector: true camera mount = declared R exp([r])
+
+The geometry defaults to the calibration paper's Table 1 calibrated column (``truth_default.yaml``),
+so that nominal and truth differ as on the real robot.
+"""
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+import yaml
+
+from robotenis_kinematics import delta, description
+from robotenis_kinematics.description import DescriptionError
+
+EFFECTS = ('joint_scale', 'backlash', 'gravity_compliance', 'base_geometry', 'hand_eye_rotation')
+G = 9.81
+
+
+@dataclass(frozen=True)
+class GravityLoad:
+    """Static gravity load of the real robot (kg): what each arm carries and what the platform weighs.
+
+    arm: arm mass at half the arm plus half a forearm at the elbow (m_a / 2 + m_b / 2);
+    platform: platform, camera and the other halves of the three forearms (m_c + 3 m_b / 2).
+    """
+
+    arm: float = 0.5 * 1.0 + 0.5 * 1.315
+    platform: float = 1.05 + 1.5 * 1.315
+
+
+@dataclass
+class Truth:
+    """The real robot: geometry (with base_geometry applied), camera mount, ball, effects."""
+
+    geometry: object
+    camera_translation: np.ndarray
+    sphere_position: np.ndarray
+    effects: dict = field(default_factory=dict)
+    gravity_load: GravityLoad = GravityLoad()
+
+    @property
+    def camera_rotation(self):
+        """True camera mounting: the declared rotation turned by hand_eye_rotation, if any."""
+        r = np.asarray(self.effects.get('hand_eye_rotation', np.zeros(3)), dtype=float)
+        return rotation_vector_matrix(r) @ self.geometry.camera_rotation
+
+    def gravity_torque(self, P, theta):
+        """Torque (..., 3) that gravity applies to the arms at rest (N m, positive = arm down)."""
+        arm = self.gravity_load.arm * G * self.geometry.a * np.cos(theta)
+        J = delta.jacobian(self.geometry, P, theta)
+        platform = self.gravity_load.platform * G * J[..., 2, :]  # tau = J^T (m g z)
+        return arm + platform
+
+    def arm_angles(self, motor, direction, P=None):
+        """True arm angles (..., 3) for motor angles (absolute, rad) after motion in ``direction``.
+
+        ``direction`` is the sign (+1/-1) of each motor's last motion; backlash leaves the arm behind
+        the motor by half its width. Compliance needs the pose: it is solved by fixed point (the sag is
+        small, so two passes converge to well below a resolver count).
+        """
+        theta = np.asarray(motor, dtype=float) - 0.5 * np.asarray(self.effects.get('backlash', np.zeros(3))) * direction
+        c = np.asarray(self.effects.get('gravity_compliance', np.zeros(3)), dtype=float)
+        if not np.any(c):
+            return theta
+        sagged = theta
+        for _ in range(3):
+            P = delta.forward(self.geometry, sagged)
+            sagged = theta + c * self.gravity_torque(P, sagged)
+        return sagged
+
+    def reading(self, motor):
+        """Resolver increments the drives report for motor angles (absolute): gear-ratio error applied."""
+        s = np.asarray(self.effects.get('joint_scale', np.zeros(3)), dtype=float)
+        return (1 + s) * (np.asarray(motor, dtype=float) - self.geometry.theta0)
+
+    def motor_from_reading(self, Theta):
+        """Motor angles (absolute) for resolver increments: the inverse of ``reading``."""
+        s = np.asarray(self.effects.get('joint_scale', np.zeros(3)), dtype=float)
+        return self.geometry.theta0 + np.asarray(Theta, dtype=float) / (1 + s)
+
+
+def rotation_vector_matrix(r):
+    """Rotation matrix exp([r]x) of a rotation vector r (rad), Rodrigues' formula."""
+    r = np.asarray(r, dtype=float)
+    angle = np.linalg.norm(r)
+    if angle < 1e-15:
+        return np.eye(3)
+    k = r / angle
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+def _vector(value, key, n=3):
+    arr = np.asarray(value, dtype=float) if isinstance(value, list) else None
+    if arr is None or arr.shape != (n,) or not np.all(np.isfinite(arr)):
+        raise DescriptionError(f"{key}: expected {n} finite numbers, got {value!r}")
+    return arr
+
+
+def from_dict(data):
+    """Truth from parsed YAML; errors name the key."""
+    if not isinstance(data, dict) or 'geometry' not in data:
+        raise DescriptionError("truth: geometry: missing key")
+    try:
+        geometry = description.from_dict(data['geometry'])
+    except DescriptionError as e:
+        raise DescriptionError(f"geometry.{e}") from None
+    effects = dict(data.get('effects') or {})
+    for name in effects:
+        if name not in EFFECTS:
+            raise DescriptionError(f"effects.{name}: unknown effect (known: {', '.join(EFFECTS)})")
+    parsed = {}
+    for name, value in effects.items():
+        if name == 'base_geometry':
+            dH = _vector(value.get('dH', [0, 0, 0]), 'effects.base_geometry.dH')
+            dphi = _vector(value.get('dphi', [0, 0, 0]), 'effects.base_geometry.dphi')
+            geometry = geometry.copy(H=geometry.H + dH, phi=geometry.phi + dphi)
+            parsed[name] = {'dH': dH, 'dphi': dphi}
+        else:
+            parsed[name] = _vector(value, f'effects.{name}')
+    for key in ('camera_translation', 'sphere_position'):
+        if key not in data:
+            raise DescriptionError(f"{key}: missing key")
+    return Truth(geometry, _vector(data['camera_translation'], 'camera_translation'),
+                 _vector(data['sphere_position'], 'sphere_position'), parsed)
+
+
+def load(path=None):
+    """Read a truth file; without a path, the default (Table 1 calibrated, no effects)."""
+    path = path or default_path()
+    with open(path) as f:
+        try:
+            data = yaml.safe_load(f)
+        except yaml.YAMLError as e:
+            raise DescriptionError(f"{path}: not valid YAML ({e})") from e
+    try:
+        return from_dict(data)
+    except DescriptionError as e:
+        raise DescriptionError(f"{path}: {e}") from None
+
+
+def with_effects(truth, **effects):
+    """A copy of ``truth`` with effects added (as a truth file would give them)."""
+    data = {'geometry': truth.geometry.to_dict(), 'camera_translation': truth.camera_translation.tolist(),
+            'sphere_position': truth.sphere_position.tolist(),
+            # base_geometry is already in the geometry: carrying it again would apply it twice
+            'effects': {**{k: v for k, v in truth.effects.items() if k != 'base_geometry'}, **effects}}
+    return from_dict(yaml.safe_load(yaml.safe_dump(_plain(data))))
+
+
+def _plain(obj):
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, np.ndarray)):
+        return [_plain(v) for v in obj]
+    return float(obj) if isinstance(obj, (np.floating, float, int)) and not isinstance(obj, bool) else obj
+
+
+def default_path():
+    here = os.path.dirname(os.path.abspath(__file__))
+    return os.path.normpath(os.path.join(here, '..', 'config', 'truth_default.yaml'))

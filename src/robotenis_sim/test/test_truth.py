@@ -1,0 +1,81 @@
+import numpy as np
+import pytest
+
+from robotenis_kinematics import delta, description
+from robotenis_kinematics.description import DescriptionError
+from robotenis_sim import truth as sim_truth
+
+
+@pytest.fixture
+def truth():
+    return sim_truth.load()
+
+
+def test_default_truth_is_table1_without_effects(truth):
+    np.testing.assert_allclose(truth.geometry.b * 1e3, [1002.86, 1001.37, 1001.28])
+    assert truth.effects == {}
+    np.testing.assert_array_equal(truth.camera_rotation, description.nominal().camera_rotation)
+
+
+def test_reading_round_trip_with_gear_error(truth):
+    t = sim_truth.with_effects(truth, joint_scale=[1e-3, -2e-3, 0.0])
+    motor = truth.geometry.theta0 + np.array([0.2, -0.1, 0.3])
+    np.testing.assert_allclose(t.reading(motor), (1 + np.array([1e-3, -2e-3, 0])) * [0.2, -0.1, 0.3])
+    np.testing.assert_allclose(t.motor_from_reading(t.reading(motor)), motor, atol=1e-15)
+
+
+def test_backlash_lags_against_the_motion(truth):
+    t = sim_truth.with_effects(truth, backlash=[2e-4, 0.0, 0.0])
+    motor = np.array([0.3, 0.3, 0.3])
+    np.testing.assert_allclose(t.arm_angles(motor, np.array([1, 1, 1])) - motor, [-1e-4, 0, 0])
+    np.testing.assert_allclose(t.arm_angles(motor, np.array([-1, 1, 1])) - motor, [1e-4, 0, 0])
+
+
+def test_gravity_sags_the_arms_down(truth):
+    t = sim_truth.with_effects(truth, gravity_compliance=[1e-5, 1e-5, 1e-5])
+    motor = delta.inverse(truth.geometry, [0.1, 0.0, 0.9])
+    sag = t.arm_angles(motor, np.ones(3)) - motor
+    P = delta.forward(truth.geometry, motor)
+    # Positive torque pulls the arm down (theta grows); the sag equals c * tau to first order.
+    np.testing.assert_allclose(sag, 1e-5 * t.gravity_torque(P, motor), rtol=1e-2)
+    assert np.all(sag > 0)
+
+
+def test_gravity_torque_matches_virtual_work(truth):
+    """tau_i = dV/dtheta_i with V = -(m_arm g a sin theta + m_platform g z): finite differences."""
+    geometry = truth.geometry
+    theta = delta.inverse(geometry, [0.05, -0.1, 0.85])
+    load = truth.gravity_load
+
+    def minus_potential(th):
+        P = delta.forward(geometry, th)
+        return sim_truth.G * (load.arm * np.sum(geometry.a * np.sin(th)) + load.platform * P[2])
+
+    eps = 1e-6
+    numeric = [(minus_potential(theta + eps * e) - minus_potential(theta - eps * e)) / (2 * eps) for e in np.eye(3)]
+    np.testing.assert_allclose(truth.gravity_torque(delta.forward(geometry, theta), theta), numeric, rtol=1e-6)
+
+
+def test_hand_eye_rotation_turns_the_camera(truth):
+    t = sim_truth.with_effects(truth, hand_eye_rotation=[0.0, 0.0, 0.01])
+    R = t.camera_rotation
+    np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-12)
+    assert np.isclose(np.arccos((np.trace(R @ truth.camera_rotation.T) - 1) / 2), 0.01)
+
+
+def test_base_geometry_moves_the_motors(truth):
+    t = sim_truth.with_effects(truth, base_geometry={'dH': [0.001, 0, 0], 'dphi': [0, 0.002, 0]})
+    np.testing.assert_allclose(t.geometry.H - truth.geometry.H, [0.001, 0, 0])
+    np.testing.assert_allclose(t.geometry.phi - truth.geometry.phi, [0, 0.002, 0])
+
+
+@pytest.mark.parametrize('change, key', [({'geometry': None}, 'geometry: missing key'),
+                                         ({'effects': {'warp': [0, 0, 0]}}, 'effects.warp: unknown effect'),
+                                         ({'effects': {'backlash': [0, 0]}}, 'effects.backlash: expected 3'),
+                                         ({'sphere_position': 'here'}, 'sphere_position: expected 3')])
+def test_bad_truth_files_name_the_key(truth, change, key):
+    data = {'geometry': truth.geometry.to_dict(), 'camera_translation': [0.1, 0, 0], 'sphere_position': [0.8, 0, 1]}
+    data.update(change)
+    data = {k: v for k, v in data.items() if v is not None}
+    with pytest.raises(DescriptionError, match=key):
+        sim_truth.from_dict(data)
