@@ -1,0 +1,78 @@
+"""A calibration session reduced to what identification needs: one averaged measurement per rest.
+
+Whatever recorded it -- this system's calibration node, another driver's bag, or the static session
+simulator -- a session is the declared robot description plus, for each pose the robot rested at,
+in visit order: the resolver increments and the sphere centre seen by the hand camera, each averaged
+over the rest with its uncertainty.
+"""
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from robotenis_kinematics.identification import Measurements
+
+
+@dataclass
+class Session:
+    """Averaged measurements of K rests, in the order the robot visited them.
+
+    description : the declared RobotDescription (what the system believed during the session).
+    Theta : (K, 3) resolver increments from home, rad.
+    sigma_Theta : (K, 3) standard deviation of each averaged increment, rad.
+    sphere : (K, 3) sphere centre in the camera optical frame, m.
+    sphere_cov : (K, 3, 3) covariance of each averaged sphere centre, m^2.
+    stamps : (K,) time of each rest (middle of the averaging window), s.
+    samples : (K,) number of camera frames averaged at each rest.
+    """
+
+    description: object
+    Theta: np.ndarray
+    sigma_Theta: np.ndarray
+    sphere: np.ndarray
+    sphere_cov: np.ndarray
+    stamps: np.ndarray
+    samples: np.ndarray = field(default=None)
+
+    def __post_init__(self):
+        K = len(self.Theta)
+        self.Theta = np.asarray(self.Theta, dtype=float).reshape(K, 3)
+        self.sigma_Theta = np.broadcast_to(np.asarray(self.sigma_Theta, dtype=float), (K, 3)).copy()
+        self.sphere = np.asarray(self.sphere, dtype=float).reshape(K, 3)
+        self.sphere_cov = np.broadcast_to(np.asarray(self.sphere_cov, dtype=float), (K, 3, 3)).copy()
+        self.stamps = np.asarray(self.stamps, dtype=float).reshape(K)
+        self.samples = np.ones(K, dtype=int) if self.samples is None else np.asarray(self.samples, dtype=int)
+
+    def __len__(self):
+        return len(self.Theta)
+
+    def subset(self, index):
+        """The rests selected by ``index`` (visit order is kept for a sorted index)."""
+        return Session(self.description, self.Theta[index], self.sigma_Theta[index], self.sphere[index],
+                       self.sphere_cov[index], self.stamps[index], self.samples[index])
+
+    def measurements(self, camera_rotation=None):
+        """Incremental measurements for identification (eq. 3).
+
+        The effector only translates, so with the fixed ball at S and the camera at P + t, the
+        sphere seen at s_k gives P_k = (S - t) - R s_k: Pi_k = -R s_k, and P0 = S - t is the effector
+        position that would put the ball at the optical centre (identified with the rest). R is the
+        declared camera rotation unless another is given (the hand-eye effect refines it).
+        """
+        R = self.description.camera_rotation if camera_rotation is None else camera_rotation
+        Pi = -self.sphere @ R.T
+        cov = np.einsum('ab,kbc,dc->kad', R, self.sphere_cov, R)
+        return Measurements(self.Theta, Pi, self.sigma_Theta, cov)
+
+    def motion_direction(self):
+        """Sign (+1/-1) of each joint's last motion before each rest, from the visit order (K, 3).
+
+        The robot starts at home (Theta = 0); a joint that did not move keeps its previous sign.
+        """
+        previous = np.vstack([np.zeros((1, 3)), self.Theta[:-1]])
+        step = np.sign(self.Theta - previous)
+        out = np.empty_like(step)
+        last = np.ones(3)
+        for k, s in enumerate(step):
+            last = np.where(s != 0, s, last)
+            out[k] = last
+        return out
