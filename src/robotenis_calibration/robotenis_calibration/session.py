@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from robotenis_kinematics import effects
 from robotenis_kinematics.identification import Measurements
 
 
@@ -64,15 +65,5 @@ class Session:
         return Measurements(self.Theta, Pi, self.sigma_Theta, cov)
 
     def motion_direction(self):
-        """Sign (+1/-1) of each joint's last motion before each rest, from the visit order (K, 3).
-
-        The robot starts at home (Theta = 0); a joint that did not move keeps its previous sign.
-        """
-        previous = np.vstack([np.zeros((1, 3)), self.Theta[:-1]])
-        step = np.sign(self.Theta - previous)
-        out = np.empty_like(step)
-        last = np.ones(3)
-        for k, s in enumerate(step):
-            last = np.where(s != 0, s, last)
-            out[k] = last
-        return out
+        """Sign (+1/-1) of each joint's last motion before each rest (K, 3), from the visit order."""
+        return effects.motion_direction(self.Theta)

@@ -7,7 +7,9 @@ the loop-closure equations of the three legs are (eq. 4)
     Gamma_ik = |P0 + Pi_k + h_i e_i - (H_i + a_i cos theta_ik) e_i - a_i sin theta_ik z|^2 - b_i^2 = 0,
 
 stacked leg by leg into Phi(U, V) (eq. 5). The paper's unknowns are U = [u_1 u_2 u_3 P0] with
-u_i = [a_i b_i h_i theta_i0] (15 parameters); H_i and phi_i can be added for the observability study.
+u_i = [a_i b_i h_i theta_i0] (15 parameters); H_i and phi_i can be added for the observability study,
+and so can the parameters of the effects the residual loop adds (``effects.py``): joint-side effects
+shift theta_ik, the hand-eye rotation turns Pi_k.
 
 Estimator
 ---------
@@ -25,12 +27,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from robotenis_kinematics import delta
+from robotenis_kinematics import delta, effects
 
 LEG_PARAMETERS = ('a', 'b', 'h', 'H', 'phi', 'theta0')
 PAPER_PARAMETERS = tuple(f'{p}{i}' for i in (1, 2, 3) for p in ('a', 'b', 'h', 'theta0')) + ('P0x', 'P0y', 'P0z')
 ALL_PARAMETERS = tuple(f'{p}{i}' for i in (1, 2, 3) for p in LEG_PARAMETERS) + ('P0x', 'P0y', 'P0z')
-_Z = np.array([0.0, 0.0, 1.0])
 
 
 @dataclass
@@ -41,12 +42,15 @@ class Measurements:
     Pi : (K, 3) incremental effector positions in the base frame, m.
     sigma_Theta : (3,) or (K, 3) standard deviation of each resolver increment, rad.
     cov_Pi : (3, 3) or (K, 3, 3) covariance of each Pi_k, m^2.
+    direction : (K, 3) sign of each joint's last motion before pose k (for backlash); by default
+        from the order of Theta (``effects.motion_direction``).
     """
 
     Theta: np.ndarray
     Pi: np.ndarray
     sigma_Theta: np.ndarray
     cov_Pi: np.ndarray
+    direction: np.ndarray = None
 
     def __post_init__(self):
         self.Theta = np.asarray(self.Theta, dtype=float)
@@ -58,21 +62,26 @@ class Measurements:
             raise ValueError("measurements contain NaN or infinite values")
         self.sigma_Theta = np.broadcast_to(np.asarray(self.sigma_Theta, dtype=float), (K, 3))
         self.cov_Pi = np.broadcast_to(np.asarray(self.cov_Pi, dtype=float), (K, 3, 3))
+        if self.direction is None:
+            self.direction = effects.motion_direction(self.Theta)
 
     def __len__(self):
         return len(self.Theta)
 
     def subset(self, index):
         """The measurements of the poses selected by ``index``."""
-        return Measurements(self.Theta[index], self.Pi[index], self.sigma_Theta[index], self.cov_Pi[index])
+        return Measurements(self.Theta[index], self.Pi[index], self.sigma_Theta[index], self.cov_Pi[index],
+                            self.direction[index])
 
 
 @dataclass
 class Model:
-    """A point in parameter space: a robot description and the camera reference position P0."""
+    """A point in parameter space: a robot description, the camera reference position P0, and the
+    parameters of the effects in use (``effects.PARAMETERS``: name -> array of 3)."""
 
     desc: object
     P0: np.ndarray
+    effects: dict = field(default_factory=dict)
 
     def get(self, names):
         """Parameter vector U for the given parameter names (e.g. PAPER_PARAMETERS)."""
@@ -82,47 +91,63 @@ class Model:
         """A new Model with the named parameters set to U."""
         desc = self.desc.copy()
         P0 = np.array(self.P0, dtype=float)
+        fx = {k: np.array(v, dtype=float) for k, v in self.effects.items()}
         for n, u in zip(names, U):
             if n.startswith('P0'):
                 P0['xyz'.index(n[2])] = u
+            elif n[:-1] in effects.PARAMETERS:
+                fx.setdefault(n[:-1], np.zeros(3))[int(n[-1]) - 1] = u
             else:
                 getattr(desc, n[:-1])[int(n[-1]) - 1] = u
-        return Model(desc, P0)
+        return Model(desc, P0, fx)
 
 
 def _get(model, name):
     if name.startswith('P0'):
         return model.P0['xyz'.index(name[2])]
+    if name[:-1] in effects.PARAMETERS:
+        return model.effects.get(name[:-1], np.zeros(3))[int(name[-1]) - 1]
     return getattr(model.desc, name[:-1])[int(name[-1]) - 1]
 
 
-def _leg_geometry(desc, P0, Theta, Pi):
-    """d_ik = C_ik - B_ik (K, 3, 3), theta_ik (K, 3), e_i and de_i/dphi_i (3, 3)."""
-    theta = desc.theta0 + Theta
-    d = delta.effector_joints(desc, P0 + Pi) - delta.elbow_points(desc, theta)
+def effect_names(effect):
+    """Parameter names of one effect, e.g. ('backlash1', 'backlash2', 'backlash3')."""
+    return tuple(f'{effect}{i}' for i in (1, 2, 3))
+
+
+def _leg_geometry(model, meas):
+    """d_ik = C_ik - B_ik (K, 3, 3), theta_ik (K, 3), the effector positions P_k (K, 3), the
+    joint-effect derivatives dtheta_ik/d(effect parameter i) and e_i, de_i/dphi_i (3, 3)."""
+    desc = model.desc
+    Pi = effects.rotate_increments(model.effects, meas.Pi)
+    P = model.P0 + Pi
+    theta, dtheta = effects.model_joint_angles(desc, model.effects, meas.Theta, meas.direction, P)
+    d = delta.effector_joints(desc, P) - delta.elbow_points(desc, theta)
     e = delta.leg_directions(desc)
     de = np.stack([-e[:, 1], e[:, 0], np.zeros(3)], axis=-1)
-    return d, theta, e, de
+    return d, theta, Pi, dtheta, e, de
 
 
 def constraints(model, meas):
     """Gamma_ik (K, 3) of eq. (4); zero for exact measurements of the true model."""
-    d, _, _, _ = _leg_geometry(model.desc, model.P0, meas.Theta, meas.Pi)
+    d = _leg_geometry(model, meas)[0]
     return np.einsum('kij,kij->ki', d, d) - model.desc.b ** 2
 
 
 def partials(model, meas):
     """Derivatives of Gamma_ik, each (K, 3): with respect to leg i's own parameters
-    ('a', 'b', 'h', 'H', 'phi', 'theta0'), to the joint angle ('theta', equal to 'theta0'), and to
-    P0 = Pi ('P', shape (K, 3, 3): dGamma_ik / dP_j)."""
+    ('a', 'b', 'h', 'H', 'phi', 'theta0'), to the joint angle ('theta', equal to 'theta0'), to the
+    joint effects' parameter of joint i ('joint_scale', 'backlash', 'gravity_compliance'), and, shape
+    (K, 3, 3), to P0 = Pi ('P': dGamma_ik / dP_j) and to the hand-eye rotation vector
+    ('hand_eye_rotation': dGamma_ik / dr_j = 2 (Pi_k x d_ik)_j, small rotations)."""
     desc = model.desc
-    d, theta, e, de = _leg_geometry(desc, model.P0, meas.Theta, meas.Pi)
+    d, theta, Pi, dtheta_fx, e, de = _leg_geometry(model, meas)
     d_e = np.einsum('kij,ij->ki', d, e)
     d_de = np.einsum('kij,ij->ki', d, de)
     d_z = d[..., 2]
     c, s = np.cos(theta), np.sin(theta)
     dtheta = 2 * desc.a * (s * d_e - c * d_z)
-    return {
+    out = {
         'a': -2 * (c * d_e + s * d_z),
         'b': np.broadcast_to(-2 * desc.b, d_e.shape),
         'h': 2 * d_e,
@@ -131,7 +156,10 @@ def partials(model, meas):
         'theta0': dtheta,
         'theta': dtheta,
         'P': 2 * d,
+        'hand_eye_rotation': 2 * np.cross(Pi[:, None, :], d),
     }
+    out.update({name: dtheta * dt for name, dt in dtheta_fx.items()})
+    return out
 
 
 def observation_matrix(model, meas, names=PAPER_PARAMETERS, parts=None):
@@ -142,6 +170,8 @@ def observation_matrix(model, meas, names=PAPER_PARAMETERS, parts=None):
     for col, n in enumerate(names):
         if n.startswith('P0'):
             J[:, :, col] = parts['P'][:, :, 'xyz'.index(n[2])].T
+        elif n.startswith('hand_eye_rotation'):
+            J[:, :, col] = parts['hand_eye_rotation'][:, :, int(n[-1]) - 1].T
         else:
             i = int(n[-1]) - 1
             J[i, :, col] = parts[n[:-1]][:, i]
@@ -204,8 +234,8 @@ def initial_model(desc, meas):
 
     P0 = mean_k (FK_nominal(theta0 + Theta_k) - Pi_k): every pose predicts the camera reference.
     """
-    P = delta.forward(desc, desc.theta0 + meas.Theta)
-    return Model(desc.copy(), np.mean(P - meas.Pi, axis=0))
+    P = delta.forward(desc, effects.joint_angles(desc, meas.Theta))
+    return Model(desc.copy(), np.mean(P - meas.Pi, axis=0), effects.parameters(desc))
 
 
 def gauss_newton_paper(start, meas, names=PAPER_PARAMETERS, max_iterations=50, tol=1e-12):

@@ -4,7 +4,7 @@ Read by the simulator only. A truth file is YAML::
 
     geometry: {legs: ..., camera: ..., sphere_radius: ...}   # robot description schema: the TRUE geometry
     camera_translation: [0.12, 0.0, 0.04]   # optical centre in the effector frame, m
-    sphere_position: [0.55, 0.0, 0.95]      # centre of the fixed calibration ball, base frame, m
+    sphere_position: [0.70, 0.0, 1.35]      # centre of the fixed calibration ball, base frame, m
     effects:                                 # all optional, none on by default
       joint_scale: [s1, s2, s3]              # gear ratio error: reading = (1 + s_i) (motor - theta0)
       backlash: [w1, w2, w3]                 # rad: the arm lags the motor by w_i / 2 against the last motion
@@ -21,11 +21,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import yaml
 
-from robotenis_kinematics import delta, description
+from robotenis_kinematics import delta, description, effects as model_effects
 from robotenis_kinematics.description import DescriptionError
 
 EFFECTS = ('joint_scale', 'backlash', 'gravity_compliance', 'base_geometry', 'hand_eye_rotation')
-G = 9.81
+G = model_effects.G
+rotation_vector_matrix = model_effects.rotation_vector_matrix
 
 
 @dataclass(frozen=True)
@@ -34,10 +35,12 @@ class GravityLoad:
 
     arm: arm mass at half the arm plus half a forearm at the elbow (m_a / 2 + m_b / 2);
     platform: platform, camera and the other halves of the three forearms (m_c + 3 m_b / 2).
+    The real masses differ a little from the nominal ones the calibration assumes
+    (robotenis_kinematics.effects.NOMINAL_GRAVITY_LOAD): the arm is 1.02 kg, the platform 1.10 kg.
     """
 
-    arm: float = 0.5 * 1.0 + 0.5 * 1.315
-    platform: float = 1.05 + 1.5 * 1.315
+    arm: float = 0.5 * 1.02 + 0.5 * 1.315
+    platform: float = 1.10 + 1.5 * 1.315
 
 
 @dataclass
@@ -58,10 +61,8 @@ class Truth:
 
     def gravity_torque(self, P, theta):
         """Torque (..., 3) that gravity applies to the arms at rest (N m, positive = arm down)."""
-        arm = self.gravity_load.arm * G * self.geometry.a * np.cos(theta)
-        J = delta.jacobian(self.geometry, P, theta)
-        platform = self.gravity_load.platform * G * J[..., 2, :]  # tau = J^T (m g z)
-        return arm + platform
+        load = {'arm': self.gravity_load.arm, 'platform': self.gravity_load.platform}
+        return model_effects.gravity_torque(self.geometry, P, theta, load)
 
     def arm_angles(self, motor, direction, P=None):
         """True arm angles (..., 3) for motor angles (absolute, rad) after motion in ``direction``.
@@ -89,17 +90,6 @@ class Truth:
         """Motor angles (absolute) for resolver increments: the inverse of ``reading``."""
         s = np.asarray(self.effects.get('joint_scale', np.zeros(3)), dtype=float)
         return self.geometry.theta0 + np.asarray(Theta, dtype=float) / (1 + s)
-
-
-def rotation_vector_matrix(r):
-    """Rotation matrix exp([r]x) of a rotation vector r (rad), Rodrigues' formula."""
-    r = np.asarray(r, dtype=float)
-    angle = np.linalg.norm(r)
-    if angle < 1e-15:
-        return np.eye(3)
-    k = r / angle
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
 
 
 def _vector(value, key, n=3):

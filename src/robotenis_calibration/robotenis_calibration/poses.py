@@ -1,0 +1,80 @@
+"""Choosing calibration poses the hand camera can measure.
+
+The planner knows only what a real system knows: the declared description and a rough guess of where
+the ball is (base frame, a few cm). It predicts the ball in the camera with the declared camera
+rotation and no camera offset, so it keeps wide margins; rests that still miss the ball are skipped.
+
+* ``boundary``: the paper's way -- random poses 5-10 cm from a singularity (section 5.1).
+* ``optimal``: a D-optimal design: from visible candidates, greedily add the pose that most increases
+  log det of the information matrix J_w^T J_w of the 15 parameters (the observability index that
+  shrinks the volume of the confidence ellipsoid), starting from a few random poses.
+"""
+import numpy as np
+
+from robotenis_kinematics import synthetic, workspace
+from robotenis_kinematics import identification as idf
+
+PLAN_RANGE = (0.20, 0.55)      # m along the optical axis: inside the detector's 0.15-0.60
+PLAN_HALF_FIELD = (0.45, 0.33)  # tan of the usable half field of view, x and y (640x480, f = 500 px)
+SELECTIONS = ('boundary', 'optimal')
+
+
+def predicted_sphere(declared, sphere_guess, P):
+    """Where the ball should appear in the optical frame (K, 3) for effector positions P."""
+    return (np.asarray(sphere_guess, dtype=float) - P) @ declared.camera_rotation
+
+
+def plannable(declared, sphere_guess, P):
+    """Mask of positions whose predicted ball lies well inside the range and field of view."""
+    x, y, z = predicted_sphere(declared, sphere_guess, P).T
+    return (z >= PLAN_RANGE[0]) & (z <= PLAN_RANGE[1]) & (np.abs(x) <= PLAN_HALF_FIELD[0] * z) \
+        & (np.abs(y) <= PLAN_HALF_FIELD[1] * z)
+
+
+def visible_candidates(declared, sphere_guess, n, rng, band=None, batch=20000, max_batches=200):
+    """``n`` random workspace positions (n, 3) the camera should see; ValueError if too few exist."""
+    out, count = [], 0
+    for _ in range(max_batches):
+        P = workspace.sample(declared, batch, rng, band=band)
+        P = P[plannable(declared, sphere_guess, P)]
+        out.append(P)
+        count += len(P)
+        if count >= n:
+            return np.concatenate(out)[:n]
+    raise ValueError(f'only {count} plannable poses found near the ball guess {sphere_guess}: '
+                     'move the ball into the camera\'s reach')
+
+
+def boundary(declared, sphere_guess, n, rng):
+    """The paper's poses: random, visible, 5-10 cm from a singularity."""
+    return visible_candidates(declared, sphere_guess, n, rng, band=(0.05, 0.10))
+
+
+def optimal(declared, sphere_guess, n, rng, pool_size=3000, seed_poses=20):
+    """D-optimal poses (greedy log det of the 15-parameter information matrix), visit order random."""
+    pool = visible_candidates(declared, sphere_guess, pool_size, rng)
+    meas = synthetic.measure(declared, pool)
+    model = synthetic.true_model(declared)
+    _, J = idf.whitened_problem(model, meas, idf.PAPER_PARAMETERS)
+    rows = J.reshape(len(pool), 3, -1)
+    chosen = list(rng.choice(len(pool), seed_poses, replace=False))
+    info = np.einsum('kip,kiq->pq', rows[chosen], rows[chosen]) + 1e-9 * np.eye(J.shape[1])
+    available = np.ones(len(pool), dtype=bool)
+    available[chosen] = False
+    while len(chosen) < n:
+        # det(I + A^T M^-1 A) for each candidate's 3 rows A (matrix determinant lemma).
+        Minv = np.linalg.inv(info)
+        S = np.eye(3) + np.einsum('kip,pq,kjq->kij', rows, Minv, rows)
+        gain = np.where(available, np.linalg.slogdet(S)[1], -np.inf)
+        k = int(np.argmax(gain))
+        chosen.append(k)
+        available[k] = False
+        info += rows[k].T @ rows[k]
+    return pool[rng.permutation(chosen)]
+
+
+def select(method, declared, sphere_guess, n, rng):
+    """Poses by name ('boundary' or 'optimal')."""
+    if method not in SELECTIONS:
+        raise ValueError(f"unknown pose selection {method!r} (known: {', '.join(SELECTIONS)})")
+    return (boundary if method == 'boundary' else optimal)(declared, sphere_guess, n, rng)

@@ -1,0 +1,93 @@
+"""The residual loop on static sessions whose truth carries an effect the description does not declare."""
+import numpy as np
+import pytest
+from scipy import stats
+
+from robotenis_calibration import diagnosis, poses, result
+from robotenis_calibration.session import Session
+from robotenis_kinematics import delta, description, effects, synthetic
+from robotenis_sim import static_session
+from robotenis_sim import truth as sim_truth
+
+# Undeclared effects of realistic size: each moves the effector by tenths of a millimetre.
+EFFECTS = {
+    'joint_scale': {'joint_scale': [2e-3, -1e-3, 1.5e-3]},
+    'backlash': {'backlash': [1e-3, 6e-4, 8e-4]},
+    'gravity_compliance': {'gravity_compliance': [1.5e-4, 1.5e-4, 1.5e-4]},
+    'hand_eye_rotation': {'hand_eye_rotation': [0.004, -0.003, 0.005]},
+    'base_geometry': {'base_geometry': {'dH': [0.002, 0.0, 0.0], 'dphi': [0.0, 0.008, -0.006]}},
+}
+
+
+@pytest.fixture(scope='module')
+def setting():
+    nominal = description.nominal()
+    truth = sim_truth.load()
+    guess = truth.sphere_position + np.array([0.03, -0.02, 0.02])  # what the user tells the planner
+    P = poses.boundary(nominal, guess, 300, np.random.default_rng(5))
+    return nominal, truth, P
+
+
+def session(truth, declared, P, seed):
+    rng = np.random.default_rng(seed)
+    Theta, sigma, sphere, cov, _ = static_session.run(truth, declared, P, synthetic.NoiseModel(), rng)
+    return Session(declared, Theta, sigma, sphere, cov, 8.0 * np.arange(len(Theta)))
+
+
+def diagnose(s, seed=1):
+    return diagnosis.run(s.description, s.measurements(), s.sphere, s.stamps, seed=seed)
+
+
+@pytest.fixture(scope='module')
+def clean(setting):
+    nominal, truth, P = setting
+    return diagnose(session(truth, nominal, P, seed=7))
+
+
+@pytest.mark.parametrize('name', list(EFFECTS))
+def test_each_effect_is_found_named_and_corrected(setting, clean, name):
+    nominal, truth, P = setting
+    d = diagnose(session(sim_truth.with_effects(truth, **EFFECTS[name]), nominal, P, seed=7))
+    assert d.effects == [name]
+    assert d.errors_mm['final'] < 2 * clean.errors_mm['final']
+    assert d.errors_mm['final'] < d.errors_mm['plain']
+
+
+def test_no_effect_is_claimed_on_clean_data_at_the_stated_rate(setting):
+    """Over 30 noise seeds the loop may claim an effect in at most the binomial 99.9 % quantile of
+    sessions at its level ALPHA (each claim needs a Bonferroni-corrected score test first)."""
+    nominal, truth, P = setting
+    seeds = 30
+    claims = sum(bool(diagnose(session(truth, nominal, P, seed)).effects) for seed in range(100, 100 + seeds))
+    assert claims <= stats.binom.ppf(0.999, seeds, diagnosis.ALPHA)
+
+
+def test_clean_residuals_pass_the_size_test(clean):
+    assert clean.effects == []
+    assert clean.size_test['p_value'] > diagnosis.ALPHA / 10  # a 1-in-1000 failure at most
+    assert clean.errors_mm['plain'] < clean.errors_mm['nominal'] / 5
+
+
+def test_unidentifiable_H_is_dropped_beside_h(setting, clean):
+    test = diagnosis.score_test(clean.plain, session(setting[1], setting[0], setting[2], 7).measurements()
+                                .subset(clean.train), 'base_geometry')
+    assert set(test.dropped) == {'H1', 'H2', 'H3'} and set(test.parameters) == {'phi1', 'phi2', 'phi3'}
+
+
+def test_result_description_applies_the_effects_in_fk(setting, tmp_path):
+    nominal, truth, P = setting
+    s = session(sim_truth.with_effects(truth, **EFFECTS['backlash']), nominal, P, seed=9)
+    d = diagnose(s)
+    desc = result.calibrated_description(d, nominal)
+    path = tmp_path / 'result.yaml'
+    description.save(desc, path)
+    back = description.load(path)
+    assert [e['name'] for e in back.effects] == ['backlash']
+    np.testing.assert_allclose(back.effects[0]['width'], EFFECTS['backlash']['backlash'], atol=1e-4)
+    # fk of the readings in visit order, with backlash, lands where the camera saw the effector.
+    meas = s.measurements()
+    P_fk = delta.forward(back, effects.joint_angles(back, meas.Theta))
+    seen = d.final.model.P0 + meas.Pi
+    rms = np.sqrt(np.mean(np.sum((P_fk - seen) ** 2, axis=1)))
+    assert rms < 3 * d.errors_mm['final'] * 1e-3
+    assert back.report['effects_found'] == ['backlash']
