@@ -23,6 +23,7 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
+            'launch = robotenis_sim.launch:main',
         ],
     },
 )
