@@ -1,0 +1,120 @@
+"""The calibration session as a state machine, fed with time and measurements, free of ROS.
+
+For each planned pose, in order: command it, wait until the joints are still, wait the settle time
+(vibrations of the robot and the ball's holder), then average resolver readings and sphere
+detections until enough frames are in; a pose whose ball is not seen within a time-out is skipped
+with the reason. The calibration node feeds it messages and executes the actions it returns.
+"""
+from dataclasses import dataclass, field
+
+import numpy as np
+
+MOVING, SETTLING, MEASURING, DONE = 'moving', 'settling', 'measuring', 'done'
+
+
+@dataclass
+class Rest:
+    """What was measured at one pose."""
+
+    index: int
+    start: float
+    end: float
+    Theta: list = field(default_factory=list)
+    sphere: list = field(default_factory=list)
+    sphere_cov: list = field(default_factory=list)
+
+
+@dataclass
+class RunnerConfig:
+    frames_per_pose: int = 500
+    settle_time: float = 4.0           # s, the paper's wait at each change of pose
+    still_speed: float = 2e-3          # rad/s: below this on every joint the robot is still
+    still_time: float = 0.05           # s of stillness before the settle time starts
+    move_timeout: float = 10.0         # s to reach a pose
+    measure_timeout: float = 10.0      # s to collect the frames before the pose is skipped
+
+
+class SessionRunner:
+    """Drives one session; ``actions`` lists what the node must do, ``rests`` what was measured."""
+
+    def __init__(self, poses, config=RunnerConfig()):
+        self.poses = np.asarray(poses, dtype=float)
+        self.config = config
+        self.index = -1
+        self.state = MOVING
+        self.rests, self.skipped = [], []
+        self.actions = []
+        self._t_state = None
+        self._still_since = None
+        self._rest = None
+
+    @property
+    def fraction(self):
+        """Share of the session done (0..1)."""
+        return max(self.index, 0) / len(self.poses) if self.state != DONE else 1.0
+
+    def _enter(self, state, t):
+        self.state, self._t_state = state, t
+
+    def _next_pose(self, t):
+        self.index += 1
+        if self.index >= len(self.poses):
+            self._enter(DONE, t)
+            self.actions.append(('done', None))
+            return
+        self._still_since = None
+        self._enter(MOVING, t)
+        self.actions.append(('goal', self.poses[self.index]))
+        self.actions.append(('progress', (MOVING, self.index, len(self.poses))))
+
+    def start(self, t):
+        self._next_pose(t)
+
+    def joint_state(self, t, Theta, velocity):
+        """One /joint_states sample: increments (rad) and speeds (rad/s) of the three joints."""
+        if self.state == MOVING:
+            still = np.all(np.abs(velocity) < self.config.still_speed)
+            self._still_since = (self._still_since or t) if still else None
+            # Ignore stillness right after the goal: the robot has not started moving yet.
+            if still and t - self._still_since >= self.config.still_time and t - self._t_state > 0.1:
+                self._enter(SETTLING, t)
+                self.actions.append(('progress', (SETTLING, self.index, len(self.poses))))
+        elif self.state == MEASURING:
+            self._rest.Theta.append(np.asarray(Theta, dtype=float))
+
+    def detection(self, t, position, covariance):
+        """One sphere detection (optical frame, m) with its covariance (3x3, m^2)."""
+        if self.state == MEASURING and np.all(np.isfinite(position)):
+            self._rest.sphere.append(np.asarray(position, dtype=float))
+            self._rest.sphere_cov.append(np.asarray(covariance, dtype=float).reshape(3, 3))
+
+    def tick(self, t):
+        """Advance on time alone: settle time over, time-outs, enough frames."""
+        c = self.config
+        if self.state == MOVING and t - self._t_state > c.move_timeout:
+            self.skipped.append((self.index, f'did not come to rest within {c.move_timeout:.0f} s'))
+            self._next_pose(t)
+        elif self.state == SETTLING and t - self._t_state >= c.settle_time:
+            self._rest = Rest(self.index, t, t)
+            self._enter(MEASURING, t)
+            self.actions.append(('rest_start', self.index))
+            self.actions.append(('progress', (MEASURING, self.index, len(self.poses))))
+        elif self.state == MEASURING:
+            if len(self._rest.sphere) >= c.frames_per_pose:
+                self._finish_rest(t)
+            elif t - self._t_state > c.measure_timeout:
+                self.skipped.append((self.index, f'only {len(self._rest.sphere)} of {c.frames_per_pose} '
+                                                 f'detections in {c.measure_timeout:.0f} s (ball not in view?)'))
+                self.actions.append(('rest_end', self.index))
+                self._next_pose(t)
+
+    def _finish_rest(self, t):
+        self._rest.end = t
+        self.rests.append(self._rest)
+        self.actions.append(('rest_end', self.index))
+        self._next_pose(t)
+
+    def take_actions(self):
+        """The actions since the last call, in order."""
+        out, self.actions = self.actions, []
+        return out

@@ -1,0 +1,54 @@
+import numpy as np
+
+from robotenis_calibration.session_runner import DONE, MEASURING, RunnerConfig, SessionRunner
+
+
+def drive(runner, visible, dt=0.001, t_end=30.0):
+    """A fake robot: reaches each goal after 0.3 s; the camera sees the ball at 120 Hz when visible."""
+    t, goal_time, actions = 0.0, 0.0, []
+    runner.start(t)
+    while runner.state != DONE and t < t_end:
+        for a in runner.take_actions():
+            actions.append((t, a))
+            if a[0] == 'goal':
+                goal_time = t
+        moving = t - goal_time < 0.3
+        runner.joint_state(t, np.full(3, runner.index * 0.1), np.full(3, 0.5 if moving else 0.0))
+        if visible(runner.index) and round(t * 1000) % 8 == 0:
+            runner.detection(t, np.array([0.0, 0.0, 0.3]) + 1e-5 * runner.index, np.eye(3) * 1e-10)
+        runner.tick(t)
+        t += dt
+    actions += [(t, a) for a in runner.take_actions()]
+    return actions
+
+
+def test_each_pose_is_commanded_settled_and_measured_in_order():
+    poses = np.array([[0.1, 0, 1.0], [0.2, 0, 1.0], [0.3, 0, 1.0]])
+    runner = SessionRunner(poses, RunnerConfig(frames_per_pose=20, settle_time=0.5))
+    actions = drive(runner, lambda k: True)
+    kinds = [a[0] for _, a in actions if a[0] != 'progress']
+    assert kinds == ['goal', 'rest_start', 'rest_end'] * 3 + ['done']
+    assert [r.index for r in runner.rests] == [0, 1, 2]
+    for rest in runner.rests:
+        assert len(rest.sphere) == 20 and len(rest.Theta) > 0
+    # Every measurement starts after the move (0.3 s) and the settle time (0.5 s).
+    starts = [t for t, a in actions if a[0] == 'rest_start']
+    goals = [t for t, a in actions if a[0] == 'goal']
+    assert all(s - g >= 0.3 + 0.5 for s, g in zip(starts, goals))
+
+
+def test_a_pose_without_the_ball_is_skipped_with_a_reason():
+    poses = np.array([[0.1, 0, 1.0], [0.2, 0, 1.0], [0.3, 0, 1.0]])
+    runner = SessionRunner(poses, RunnerConfig(frames_per_pose=10, settle_time=0.1, measure_timeout=1.0))
+    drive(runner, lambda k: k != 1)
+    assert [r.index for r in runner.rests] == [0, 2]
+    assert runner.skipped[0][0] == 1 and 'ball not in view' in runner.skipped[0][1]
+    assert runner.fraction == 1.0
+
+
+def test_no_measurement_while_moving():
+    runner = SessionRunner(np.zeros((1, 3)), RunnerConfig(frames_per_pose=5, settle_time=0.2))
+    runner.start(0.0)
+    runner.take_actions()
+    runner.detection(0.01, np.ones(3), np.eye(3))
+    assert runner.state != MEASURING and runner._rest is None
