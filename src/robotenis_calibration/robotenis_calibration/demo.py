@@ -19,19 +19,13 @@ import time
 
 import numpy as np
 
-from robotenis_calibration import diagnosis, poses, result
+from robotenis_calibration import diagnosis, paper, poses, result
+from robotenis_calibration.study import EFFECTS as STUDY
 from robotenis_calibration.session import Session
 from robotenis_kinematics import delta, description, observability, synthetic, workspace
 from robotenis_kinematics import identification as idf
 from robotenis_sim import static_session
 from robotenis_sim import truth as sim_truth
-
-DEMO_EFFECT = {'backlash': [1e-3, 6e-4, 8e-4]}  # rad: what part 2's robot has and nobody declared
-
-# Calibration paper, Table 1 (mm and degrees), in PAPER_PARAMETERS order.
-TABLE1_NOMINAL = [500, 1000, 50, 0] * 3 + [0, 0, 750]
-TABLE1_CALIBRATED = [500.89, 1002.86, 48.69, 0.316, 500.01, 1001.37, 49.96, 0.844,
-                     499.96, 1001.28, 48.68, 0.936, 5.31, 0.31, 743.74]
 
 
 def human(name, value):
@@ -72,14 +66,14 @@ def main(argv=None):
     result = idf.identify(start, meas)
     t_lm = time.perf_counter() - t
     t = time.perf_counter()
-    paper = idf.gauss_newton_paper(start, meas)
+    paper_fit = idf.gauss_newton_paper(start, meas)
     t_gn = time.perf_counter() - t
     print(f'   Levenberg-Marquardt, whitened (default): {result.iterations} iterations, {t_lm * 1e3:.1f} ms, '
           f'chi2/dof = {result.chi2 / result.dof:.3f}')
-    print(f'   Gauss-Newton with pseudo-inverse (paper eq. 8): {paper.iterations} iterations, {t_gn * 1e3:.1f} ms')
+    print(f'   Gauss-Newton with pseudo-inverse (paper eq. 8): {paper_fit.iterations} iterations, {t_gn * 1e3:.1f} ms')
     print()
     print(parameter_table(idf.PAPER_PARAMETERS, start.get(idf.PAPER_PARAMETERS), result,
-                          TABLE1_NOMINAL, TABLE1_CALIBRATED))
+                          paper.TABLE1_NOMINAL, paper.TABLE1_CALIBRATED))
     true_model = synthetic.true_model(truth.geometry)
     e = result.U - true_model.get(idf.PAPER_PARAMETERS)
     print()
@@ -100,7 +94,7 @@ def main(argv=None):
 
 def residual_loop(nominal, truth, rng, args):
     """Part 2: a session on a robot with an undeclared effect, through the residual loop."""
-    truth = sim_truth.with_effects(truth, **DEMO_EFFECT)
+    truth = sim_truth.with_effects(truth, **STUDY['backlash'])  # what nobody declared
     guess = truth.sphere_position + np.array([0.03, -0.02, 0.02])  # the user's rough ball position
     print(f'4. residual loop: the robot now has an undeclared effect; ball guessed at {guess} m')
     P = poses.boundary(nominal, guess, args.poses, rng)

@@ -4,19 +4,14 @@ import pytest
 from scipy import stats
 
 from robotenis_calibration import diagnosis, poses, result
+from robotenis_calibration.study import EFFECTS as STUDY
 from robotenis_calibration.session import Session
 from robotenis_kinematics import delta, description, effects, synthetic
 from robotenis_sim import static_session
 from robotenis_sim import truth as sim_truth
 
-# Undeclared effects of realistic size: each moves the effector by tenths of a millimetre.
-EFFECTS = {
-    'joint_scale': {'joint_scale': [2e-3, -1e-3, 1.5e-3]},
-    'backlash': {'backlash': [1e-3, 6e-4, 8e-4]},
-    'gravity_compliance': {'gravity_compliance': [1.5e-4, 1.5e-4, 1.5e-4]},
-    'hand_eye_rotation': {'hand_eye_rotation': [0.004, -0.003, 0.005]},
-    'base_geometry': {'base_geometry': {'dH': [0.002, 0.0, 0.0], 'dphi': [0.0, 0.008, -0.006]}},
-}
+# Undeclared effects of realistic size (the report's study): each moves the effector by 0.01-0.4 mm.
+EFFECTS = {name: effect for name, effect in STUDY.items() if effect}
 
 
 @pytest.fixture(scope='module')

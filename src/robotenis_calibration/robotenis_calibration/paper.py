@@ -1,0 +1,8 @@
+"""The calibration paper's reference numbers, to print beside ours (mm, degrees as in the paper)."""
+
+# Table 1, in identification.PAPER_PARAMETERS order (a, b, h, theta0 per leg; then P0).
+TABLE1_NOMINAL = [500, 1000, 50, 0] * 3 + [0, 0, 750]
+TABLE1_CALIBRATED = [500.89, 1002.86, 48.69, 0.316, 500.01, 1001.37, 49.96, 0.844,
+                     499.96, 1001.28, 48.68, 0.936, 5.31, 0.31, 743.74]
+# Section 6.2.1: largest singular value of J_RC (J_RN^-1 - J_RC^-1) over the 300 x 400 mm cylinder.
+JACOBIAN_MAX = 0.015

@@ -1,0 +1,162 @@
+"""`./robotenis report [--session BAG_DIR] [--quick]`: the validation report, report/index.html.
+
+Every number in it is computed by this run, from the simulator: the identification beside the paper's
+Table 1, the observability analysis, the residual loop on robots with each undeclared effect (errors
+before and after on held-out poses), and the Jacobian study of section 6.2.1 for the nominal, the
+plain-calibrated and the final models. ``--session`` adds the calibration of a recorded bag.
+``--quick`` uses fewer poses and seeds (for CI: under 3 minutes).
+"""
+import argparse
+import html
+import os
+import sys
+import time
+
+import numpy as np
+
+from robotenis_calibration import diagnosis, jacobian_study, paper, poses, result
+from robotenis_calibration.demo import human
+from robotenis_calibration.study import EFFECTS as STUDY
+from robotenis_calibration.session import Session
+from robotenis_kinematics import description, observability, synthetic
+from robotenis_kinematics import identification as idf
+from robotenis_sim import static_session
+from robotenis_sim import truth as sim_truth
+
+
+
+def table(header, rows):
+    """An HTML table from a header and rows of cells (strings or numbers)."""
+    head = ''.join(f'<th>{html.escape(str(h))}</th>' for h in header)
+    body = ''.join('<tr>' + ''.join(f'<td>{html.escape(str(c))}</td>' for c in row) + '</tr>' for row in rows)
+    return f'<table><tr>{head}</tr>{body}</table>'
+
+
+def static_run(truth, nominal, n, seed):
+    """A static session on ``truth`` and its diagnosis."""
+    rng = np.random.default_rng(seed)
+    guess = truth.sphere_position + np.array([0.03, -0.02, 0.02])
+    P = poses.boundary(nominal, guess, n, rng)
+    Theta, sigma, sphere, cov, _ = static_session.run(truth, nominal, P, synthetic.NoiseModel(), rng)
+    s = Session(nominal, Theta, sigma, sphere, cov, 8.0 * np.arange(len(Theta)))
+    meas = s.measurements()
+    return s, meas, diagnosis.run(nominal, meas, s.sphere, s.stamps, seed=seed)
+
+
+def section_identification(nominal, truth, n, seed):
+    s, meas, _ = static_run(truth, nominal, n, seed)
+    fit = idf.identify(idf.initial_model(nominal, meas), meas)
+    rows = []
+    for j, name in enumerate(idf.PAPER_PARAMETERS):
+        if name.startswith('P0'):
+            continue  # P0 here is the camera reference, not Table 1's home position
+        unit = 'deg' if name.startswith('theta') else 'mm'
+        rows.append([name, f'{paper.TABLE1_NOMINAL[j]:.3f}', f'{human(name, fit.U[j]):.4f}',
+                     f'{human(name, fit.std[j]):.4f}', f'{paper.TABLE1_CALIBRATED[j]:.3f}', unit])
+    obs = observability.analyse(fit.model, meas)
+    text = (f'<p>{len(s)} rests of a static session (poses 5-10 cm from a singularity that the camera sees); '
+            f'chi2/dof of the fit {fit.chi2 / fit.dof:.3f}. The simulator\'s truth is Table 1\'s calibrated column, '
+            'so the identified values should agree with it within a few standard deviations.</p>')
+    text += table(['parameter', 'nominal (Table 1)', 'identified', 'std', 'calibrated (Table 1)', 'unit'], rows)
+    text += '<h3>Observability (QR with column pivoting, units 1 mm / 1 mrad)</h3><pre>' + \
+        html.escape(observability.format_report(obs)) + '</pre>'
+    return text, fit
+
+
+def section_residual_loop(nominal, truth, n, seeds, out_dir):
+    rows, plot = [], None
+    for name, effect in STUDY.items():
+        found, errors = [], []
+        for seed in range(seeds):
+            s, meas, d = static_run(sim_truth.with_effects(truth, **effect), nominal, n, 100 + seed)
+            found.append(d.effects)
+            errors.append([d.errors_mm['nominal'], d.errors_mm['plain'], d.errors_mm['final']])
+            if name == 'backlash' and plot is None:
+                plot = 'residuals-backlash.png'
+                result.plot_residuals(d, meas, s.sphere, s.stamps, os.path.join(out_dir, plot))
+                loop_text = '\n'.join(result.summary(d))
+        named = sum(f == ([name] if effect else []) for f in found)
+        e = np.mean(errors, axis=0)
+        rows.append([name, f'{named}/{seeds}', f'{e[0]:.3f}', f'{e[1]:.3f}', f'{e[2]:.3f}'])
+    text = ('<p>Each row: a robot whose truth carries one effect that the declared description does not; '
+            f'{seeds} sessions of {n} planned poses each, 30 % of the rests held out. "named" counts the sessions '
+            'where the loop found exactly that effect (for "none": claimed nothing). Errors are the held-out RMS '
+            '3D distances between where each model puts the effector and where the camera saw it.</p>')
+    text += table(['undeclared effect', 'named', 'nominal (mm)', 'plain 15-parameter (mm)', 'final (mm)'], rows)
+    text += f'<h3>One session with backlash, step by step</h3><pre>{html.escape(loop_text)}</pre>'
+    text += f'<p><img src="{plot}" width="100%"></p>'
+    return text
+
+
+def section_jacobian(nominal, fit, out_dir):
+    calibrated = fit.model.desc
+    peak, median = jacobian_study.volume_max(calibrated, nominal)
+    jacobian_study.plot(calibrated, nominal, os.path.join(out_dir, 'jacobian.png'),
+                        'largest singular value of J_RC (J_RN^-1 - J_RC^-1)')
+    return (f'<p>Over the cylinder of radius 300 mm and height 400 mm (z from {jacobian_study.Z_RANGE[0] * 1e3:.0f} '
+            f'to {jacobian_study.Z_RANGE[1] * 1e3:.0f} mm): largest singular value {peak:.4f} at most, median '
+            f'{median:.4f}; the paper found about {paper.JACOBIAN_MAX}. At 2000 mm/s of command this is at most '
+            f'{peak * 2000:.1f} mm/s of difference between the nominal and the calibrated control law.</p>'
+            '<p><img src="jacobian.png" width="100%"></p>')
+
+
+def section_session(bag_dir, out_dir):
+    from robotenis_calibration import pipeline  # reads bags: only needed with --session
+    outcome = pipeline.calibrate_bag(bag_dir, os.path.join(out_dir, 'session-result.yaml'))
+    return (f'<p>Bag <code>{html.escape(bag_dir)}</code>.</p><pre>' +
+            html.escape('\n'.join(result.summary(outcome.diagnosis))) +
+            f'</pre><p><img src="{os.path.basename(outcome.plot_path)}" width="100%"></p>')
+
+
+NOT_YET = ('<p>Not reproduced yet: the ISO 9283 repeatability and distance-accuracy tests with the rendered '
+           'circle plate (Table 4, Figures 9-10) and the visual-servoing tracking tests (Table 5). The formulas '
+           '(robotenis_calibration.iso9283), the PBVS law and its Kalman filter (robotenis_control.pbvs) are '
+           'implemented and tested; the servoing runs on the simulated robot are not.</p>')
+
+
+def build(out_dir, quick=False, session=None, say=print):
+    os.makedirs(out_dir, exist_ok=True)
+    nominal, truth = description.nominal(), sim_truth.load()
+    n, seeds = (300, 1) if quick else (300, 10)
+    started = time.perf_counter()
+    parts = []
+    say('identification beside Table 1')
+    text, fit = section_identification(nominal, truth, n, 1)
+    parts.append(('Identification beside the paper\'s Table 1', text))
+    say(f'residual loop on each undeclared effect ({seeds} sessions each)')
+    parts.append(('The residual loop: finding what the model lacks', section_residual_loop(nominal, truth, n, seeds, out_dir)))
+    say('Jacobian study')
+    parts.append(('The Jacobian study (section 6.2.1)', section_jacobian(nominal, fit, out_dir)))
+    if session:
+        say(f'calibrating the session {session}')
+        parts.append(('A recorded session', section_session(session, out_dir)))
+    parts.append(('Static tests and tracking', NOT_YET))
+    body = ''.join(f'<h2>{html.escape(title)}</h2>{text}' for title, text in parts)
+    page = (f'<!doctype html><html><head><meta charset="utf-8"><title>RoboTenis calibration report</title>'
+            '<style>body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse}'
+            'td,th{border:1px solid #999;padding:3px 8px;text-align:right}</style></head><body>'
+            '<h1>RoboTenis calibration report</h1>'
+            f'<p>Generated by <code>./robotenis report{" --quick" if quick else ""}</code> in '
+            f'{time.perf_counter() - started:.0f} s on the simulated robot. Lengths in mm, angles in degrees.</p>'
+            f'{body}</body></html>')
+    path = os.path.join(out_dir, 'index.html')
+    with open(path + '.tmp', 'w') as f:
+        f.write(page)
+    os.replace(path + '.tmp', path)
+    return path
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog='robotenis report', description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--session', help='a recorded session (bag directory) to calibrate and show')
+    parser.add_argument('--quick', action='store_true', help='fewer poses and seeds (CI)')
+    parser.add_argument('--out', default='report')
+    args = parser.parse_args(argv)
+    path = build(args.out, args.quick, args.session, say=lambda text: print(f'[report] {text}', file=sys.stderr))
+    print(f'wrote {path}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
