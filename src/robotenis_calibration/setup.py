@@ -24,6 +24,7 @@ setup(
     entry_points={
         'console_scripts': [
             'demo = robotenis_calibration.demo:main',
+            'report = robotenis_calibration.report:main',
         ],
     },
 )

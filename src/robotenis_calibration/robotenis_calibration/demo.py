@@ -1,16 +1,15 @@
 """`./robotenis demo`: a calibration of the simulated RoboTenis, printed beside the paper's Table 1,
 then the residual loop on a robot with an effect nobody declared.
 
-Part 1. The simulator's truth is Table 1's calibrated column. The demo draws the paper's 300
-calibration poses (5-10 cm from a singularity), lets the simulator measure them with the paper's
-noise (Table 3 for the camera), identifies the 15 parameters from the nominal start with both
-solvers, and prints nominal, identified (with standard deviations) and the paper's values side by
-side, then the observability analysis of all 21 parameters.
+Part 1. The simulator's truth is Table 1's calibrated column. The planner draws the paper's
+calibration poses (random, 5-10 cm from a singularity) among those where the hand camera should see
+the ball; the simulator measures each rest with the paper's noise (Table 3 for the camera). The 15
+parameters are identified from the nominal start with both solvers and printed beside Table 1, then
+the observability analysis of all 21 parameters.
 
-Part 2. The same robot, now with a backlash in its joints that no description declares. A static
-session (the poses the camera can see, in visit order) is fitted with the plain model, the residual
-loop finds and names the effect, and the held-out errors before and after are printed. The result
-(a calibrated description with its effects and report) and the residual plots go to --out.
+Part 2. The same robot, now with a backlash in its joints that no description declares, through the
+residual loop: it finds and names the effect, and prints the held-out errors before and after. The
+result (a calibrated description with its effects and report) and the residual plots go to --out.
 """
 import argparse
 import os
@@ -19,12 +18,9 @@ import time
 
 import numpy as np
 
-from robotenis_calibration import diagnosis, paper, poses, result
-from robotenis_calibration.study import EFFECTS as STUDY
-from robotenis_calibration.session import Session
-from robotenis_kinematics import delta, description, observability, synthetic, workspace
+from robotenis_calibration import paper, result, study
+from robotenis_kinematics import delta, description, observability, synthetic
 from robotenis_kinematics import identification as idf
-from robotenis_sim import static_session
 from robotenis_sim import truth as sim_truth
 
 
@@ -33,14 +29,69 @@ def human(name, value):
     return np.degrees(value) if name.startswith('theta') else value * 1e3
 
 
-def parameter_table(names, nominal, result, paper_nominal, paper_calibrated):
-    rows = ['%-8s %10s %22s %10s %12s' % ('param', 'nominal', 'identified +- std', 'Table 1', 'Table 1 cal.')]
+def parameter_table(names, fit):
+    rows = ['%-8s %10s %22s %14s  %s' % ('param', 'nominal', 'identified +- std', 'Table 1 cal.', 'unit')]
     for j, n in enumerate(names):
-        unit = 'deg' if n.startswith('theta') else 'mm'
-        rows.append('%-8s %10.3f %13.4f +- %6.4f %10.3f %12.3f  %s' % (
-            n, human(n, nominal[j]), human(n, result.U[j]), human(n, result.std[j]),
-            paper_nominal[j], paper_calibrated[j], unit))
+        if n.startswith('P0'):
+            continue  # the camera reference here, not Table 1's home position (see the note below)
+        rows.append('%-8s %10.3f %13.4f +- %6.4f %14.3f  %s' % (
+            n, paper.TABLE1_NOMINAL[j], human(n, fit.U[j]), human(n, fit.std[j]), paper.TABLE1_CALIBRATED[j],
+            'deg' if n.startswith('theta') else 'mm'))
     return '\n'.join(rows)
+
+
+def identification(nominal, truth, args):
+    """Part 1: identification beside Table 1, and the observability analysis."""
+    noise = synthetic.NoiseModel()
+    print(f'1. a static session of {args.poses} planned poses (5-10 cm from a singularity, ball in view); '
+          f'noise: resolvers {noise.sigma_resolver:.0e} rad, camera (Table 3) '
+          + ', '.join(f'{s * 1e3:.4f}' for s in noise.sigma_camera) + ' mm')
+    session, meas, _ = study.static_run(truth, nominal, args.poses, args.seed)
+    start = idf.initial_model(nominal, meas)
+    t = time.perf_counter()
+    fit = idf.identify(start, meas)
+    t_lm = time.perf_counter() - t
+    t = time.perf_counter()
+    paper_fit = idf.gauss_newton_paper(start, meas)
+    t_gn = time.perf_counter() - t
+    print(f'2. {len(session)} rests measured; identification of 15 parameters from the nominal start:')
+    print(f'   Levenberg-Marquardt, whitened (default): {fit.iterations} iterations, {t_lm * 1e3:.1f} ms, '
+          f'chi2/dof = {fit.chi2 / fit.dof:.3f}')
+    print(f'   Gauss-Newton with pseudo-inverse (paper eq. 8): {paper_fit.iterations} iterations, {t_gn * 1e3:.1f} ms')
+    print()
+    print(parameter_table(idf.PAPER_PARAMETERS, fit))
+    legs = [j for j, n in enumerate(idf.PAPER_PARAMETERS) if not n.startswith('P0')]
+    truth_U = synthetic.true_model(truth.geometry).get(idf.PAPER_PARAMETERS)[legs]
+    e = fit.U[legs] - truth_U
+    cov = fit.covariance[np.ix_(legs, legs)]
+    print()
+    print('Scored against the simulator truth (Table 1 geometry): Mahalanobis distance of the error %.1f '
+          '(chi2 with %d dof: 99 %% below %.1f)' % (e @ np.linalg.solve(cov, e), len(legs), 26.2))
+    home = delta.forward(fit.model.desc, fit.model.desc.theta0) * 1e3
+    table_home = delta.forward(truth.geometry, truth.geometry.theta0) * 1e3
+    print('Home position FK(theta0) of the identified model: (%.2f, %.2f, %.2f) mm.' % tuple(home))
+    print('Note: Table 1 lists P0 = (5.31, 0.31, 743.74) mm, but its own a, b, h, theta0 put home at\n'
+          '(%.2f, %.2f, %.2f) mm: the table is not self-consistent in P0.' % tuple(table_home))
+    print()
+    print(observability.format_report(observability.analyse(fit.model, meas)))
+
+
+def residual_loop(nominal, truth, args):
+    """Part 2: a session on a robot with an undeclared effect, through the residual loop."""
+    truth = sim_truth.with_effects(truth, **study.EFFECTS['backlash'])  # what nobody declared
+    print(f'3. residual loop: the robot now has an undeclared effect; the ball position is known to '
+          f'{np.linalg.norm(study.BALL_GUESS_ERROR) * 1e3:.0f} mm')
+    t = time.perf_counter()
+    session, meas, d = study.static_run(truth, nominal, args.poses, args.seed + 1)
+    print(f'   {len(session)} rests measured, {len(d.holdout)} held out; planning, simulation, identification '
+          f'and diagnosis: {(time.perf_counter() - t) * 1e3:.0f} ms')
+    for line in result.summary(d):
+        print('   ' + line)
+    os.makedirs(args.out, exist_ok=True)
+    path = os.path.join(args.out, 'result.yaml')
+    description.save(result.calibrated_description(d, nominal), path)
+    result.plot_residuals(d, meas, session.sphere, session.stamps, os.path.join(args.out, 'residuals.png'))
+    print(f'   wrote {path} and residuals.png (try: ./robotenis fk --model {path})')
 
 
 def main(argv=None):
@@ -50,69 +101,11 @@ def main(argv=None):
     parser.add_argument('--seed', type=int, default=1)
     parser.add_argument('--out', default='report/demo', help='folder for result.yaml and residuals.png')
     args = parser.parse_args(argv)
-
-    nominal = description.nominal()
-    truth = sim_truth.load()
-    rng = np.random.default_rng(args.seed)
-    noise = synthetic.NoiseModel()
-    print(f'1. {args.poses} calibration poses, 5-10 cm from a singularity (paper, section 5.1)')
-    P = workspace.boundary_poses(nominal, args.poses, rng)
-    print('2. the simulator measures them: resolver noise %.0e rad, camera noise (Table 3) %s mm'
-          % (noise.sigma_resolver, ', '.join(f'{s * 1e3:.4f}' for s in noise.sigma_camera)))
-    meas = synthetic.measure(truth.geometry, P, noise, rng)
-    start = idf.initial_model(nominal, meas)
-    print('3. identification from the nominal start')
-    t = time.perf_counter()
-    result = idf.identify(start, meas)
-    t_lm = time.perf_counter() - t
-    t = time.perf_counter()
-    paper_fit = idf.gauss_newton_paper(start, meas)
-    t_gn = time.perf_counter() - t
-    print(f'   Levenberg-Marquardt, whitened (default): {result.iterations} iterations, {t_lm * 1e3:.1f} ms, '
-          f'chi2/dof = {result.chi2 / result.dof:.3f}')
-    print(f'   Gauss-Newton with pseudo-inverse (paper eq. 8): {paper_fit.iterations} iterations, {t_gn * 1e3:.1f} ms')
+    nominal, truth = description.nominal(), sim_truth.load()
+    identification(nominal, truth, args)
     print()
-    print(parameter_table(idf.PAPER_PARAMETERS, start.get(idf.PAPER_PARAMETERS), result,
-                          paper.TABLE1_NOMINAL, paper.TABLE1_CALIBRATED))
-    true_model = synthetic.true_model(truth.geometry)
-    e = result.U - true_model.get(idf.PAPER_PARAMETERS)
-    print()
-    print('Scored against the simulator truth (Table 1 geometry): max |error| %.4f mm (lengths), %.5f deg (angles);'
-          % (np.abs(e[[j for j, n in enumerate(idf.PAPER_PARAMETERS) if not n.startswith('theta')]]).max() * 1e3,
-             np.degrees(np.abs(e[[j for j, n in enumerate(idf.PAPER_PARAMETERS) if n.startswith('theta')]]).max())))
-    print('Mahalanobis distance of the error: %.1f (chi2 with 15 dof: 95%% below 25.0)'
-          % (e @ np.linalg.solve(result.covariance, e)))
-    home = delta.forward(truth.geometry, truth.geometry.theta0) * 1e3
-    print('Note: P0 here is the home position FK(theta0). Table 1 lists P0 = (5.31, 0.31, 743.74) mm, but its own\n'
-          'a, b, h, theta0 put home at (%.2f, %.2f, %.2f) mm: the table is not self-consistent in P0.' % tuple(home))
-    print()
-    print(observability.format_report(observability.analyse(result.model, meas)))
-    print()
-    residual_loop(nominal, truth, rng, args)
+    residual_loop(nominal, truth, args)
     return 0
-
-
-def residual_loop(nominal, truth, rng, args):
-    """Part 2: a session on a robot with an undeclared effect, through the residual loop."""
-    truth = sim_truth.with_effects(truth, **STUDY['backlash'])  # what nobody declared
-    guess = truth.sphere_position + np.array([0.03, -0.02, 0.02])  # the user's rough ball position
-    print(f'4. residual loop: the robot now has an undeclared effect; ball guessed at {guess} m')
-    P = poses.boundary(nominal, guess, args.poses, rng)
-    Theta, sigma, sphere, cov, kept = static_session.run(truth, nominal, P, synthetic.NoiseModel(), rng)
-    print(f'   {len(P)} poses planned, {len(kept)} measured (ball in view), 30 % held out')
-    session = Session(nominal, Theta, sigma, sphere, cov, 8.0 * np.arange(len(kept)))
-    meas = session.measurements()
-    t = time.perf_counter()
-    d = diagnosis.run(nominal, meas, session.sphere, session.stamps, seed=args.seed,
-                      progress=lambda text: print('   ' + text))
-    print(f'   identification and diagnosis: {(time.perf_counter() - t) * 1e3:.0f} ms')
-    for line in result.summary(d):
-        print('   ' + line)
-    os.makedirs(args.out, exist_ok=True)
-    path = os.path.join(args.out, 'result.yaml')
-    description.save(result.calibrated_description(d, nominal), path)
-    result.plot_residuals(d, meas, session.sphere, session.stamps, os.path.join(args.out, 'residuals.png'))
-    print(f'   wrote {path} and residuals.png (try: ./robotenis fk --model {path})')
 
 
 if __name__ == '__main__':

@@ -14,13 +14,12 @@ import time
 
 import numpy as np
 
-from robotenis_calibration import diagnosis, jacobian_study, paper, poses, result
+from robotenis_calibration import jacobian_study, paper, result
 from robotenis_calibration.demo import human
+from robotenis_calibration import study
 from robotenis_calibration.study import EFFECTS as STUDY
-from robotenis_calibration.session import Session
-from robotenis_kinematics import description, observability, synthetic
+from robotenis_kinematics import description, observability
 from robotenis_kinematics import identification as idf
-from robotenis_sim import static_session
 from robotenis_sim import truth as sim_truth
 
 
@@ -32,19 +31,8 @@ def table(header, rows):
     return f'<table><tr>{head}</tr>{body}</table>'
 
 
-def static_run(truth, nominal, n, seed):
-    """A static session on ``truth`` and its diagnosis."""
-    rng = np.random.default_rng(seed)
-    guess = truth.sphere_position + np.array([0.03, -0.02, 0.02])
-    P = poses.boundary(nominal, guess, n, rng)
-    Theta, sigma, sphere, cov, _ = static_session.run(truth, nominal, P, synthetic.NoiseModel(), rng)
-    s = Session(nominal, Theta, sigma, sphere, cov, 8.0 * np.arange(len(Theta)))
-    meas = s.measurements()
-    return s, meas, diagnosis.run(nominal, meas, s.sphere, s.stamps, seed=seed)
-
-
 def section_identification(nominal, truth, n, seed):
-    s, meas, _ = static_run(truth, nominal, n, seed)
+    s, meas, _ = study.static_run(truth, nominal, n, seed)
     fit = idf.identify(idf.initial_model(nominal, meas), meas)
     rows = []
     for j, name in enumerate(idf.PAPER_PARAMETERS):
@@ -68,7 +56,7 @@ def section_residual_loop(nominal, truth, n, seeds, out_dir):
     for name, effect in STUDY.items():
         found, errors = [], []
         for seed in range(seeds):
-            s, meas, d = static_run(sim_truth.with_effects(truth, **effect), nominal, n, 100 + seed)
+            s, meas, d = study.static_run(sim_truth.with_effects(truth, **effect), nominal, n, 100 + seed)
             found.append(d.effects)
             errors.append([d.errors_mm['nominal'], d.errors_mm['plain'], d.errors_mm['final']])
             if name == 'backlash' and plot is None:
