@@ -1,0 +1,18 @@
+import re
+
+from robotenis_calibration import report
+from robotenis_calibration.study import EFFECTS
+
+
+def test_quick_report_has_every_section_and_its_figures(tmp_path):
+    path = report.build(str(tmp_path), quick=True, say=lambda text: None)
+    page = open(path).read()
+    for title in ('Identification beside', 'The residual loop', 'Choosing the poses', 'The Jacobian study',
+                  'Static tests and tracking'):
+        assert title in page
+    for image in re.findall(r'<img src="([^"]+)"', page):
+        assert (tmp_path / image).stat().st_size > 10_000
+    # One row per studied effect, each named in its one session (the study's sizes are chosen so).
+    rows = re.findall(r'<tr><td>(\w+)</td><td>(\d+)/(\d+)</td>', page)
+    assert {r[0] for r in rows} == set(EFFECTS)
+    assert all(r[1] == r[2] for r in rows)
