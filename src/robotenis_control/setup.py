@@ -23,6 +23,7 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
+            'motion_controller = robotenis_control.motion_controller_node:main',
         ],
     },
 )

@@ -24,6 +24,7 @@ setup(
     entry_points={
         'console_scripts': [
             'launch = robotenis_sim.launch:main',
+            'sim_motors = robotenis_sim.sim_motors_node:main',
         ],
     },
 )

@@ -1,0 +1,167 @@
+"""Nonlinear feedforward PD through velocity-command drives (dynamics paper, eqs. 10-11).
+
+The drives close a velocity loop and accept no torque (eq. 10):
+
+    tau = K_V (alphad_ref - alphad)
+
+The law of eq. 11 as printed, alphad_ref = K_p e + K_d ed + K_V^-1 tau_d (e = alpha_d - alpha), would
+leave tau = tau_d - K_V alphad_d on the desired motion: the drive's own velocity feedback brakes the
+arm, and the position error must grow to alphad_d / K_p (40 mm at 4 m/s and K_p = 100/s) to push
+against it. So the desired velocity is also commanded, as a velocity servo needs:
+
+    alphad_ref = alphad_d + K_p (alpha_d - alpha) + K_d (alphad_d - alphad) + K_V^-1 tau_d      (11)
+
+which gives tau = tau_d + K_V K_p e + K_V (1 + K_d) ed, a PD around the model's torque, with K_V the
+derivative gain the drive provides by itself (so K_d = 0 is a sensible default and the controller then
+needs no velocity measurement). tau_d comes from the inverse dynamics (eqs. 4-5) of the desired
+Cartesian motion; IK, Jacobians and dynamics all use the robot description in use (nominal or
+calibrated), which can be replaced while running.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from robotenis_control import dynamics, trajectory
+from robotenis_kinematics import workspace
+
+
+@dataclass(frozen=True)
+class Gains:
+    """kp (1/s) on the joint position error, kd (dimensionless) on the joint velocity error, and kv
+    (N m s/rad), the controller's value of the drives' velocity gain K_V (eq. 10)."""
+
+    kp: float = 150.0
+    kd: float = 0.0
+    kv: float = 60.0
+
+    def __post_init__(self):
+        if not (self.kp >= 0 and self.kd >= 0 and self.kv > 0):
+            raise ValueError(f"gains: need kp >= 0, kd >= 0, kv > 0 (got kp={self.kp}, kd={self.kd}, kv={self.kv})")
+
+
+def drive_torque(dalpha_ref, dalpha, K_V):
+    """tau = K_V (alphad_ref - alphad) (eq. 10): what a velocity-command drive applies (N m)."""
+    return K_V * (np.asarray(dalpha_ref) - np.asarray(dalpha))
+
+
+def velocity_command(alpha_d, dalpha_d, tau_d, alpha, dalpha, gains):
+    """alphad_ref (rad/s) of eq. 11 with the desired velocity commanded (see the module docstring)."""
+    alpha_d, dalpha_d = np.asarray(alpha_d), np.asarray(dalpha_d)
+    return (dalpha_d + gains.kp * (alpha_d - np.asarray(alpha))
+            + gains.kd * (dalpha_d - np.asarray(dalpha)) + np.asarray(tau_d) / gains.kv)
+
+
+class GoalError(ValueError):
+    """A goal or a velocity command the robot cannot follow; the message says why."""
+
+
+class MotionController:
+    """Cartesian goals and velocity commands in, drive velocity commands out, one tick at a time.
+
+    Goals are chained rest to rest (4-5-6-7 segments, trajectory.Chain timing) after whatever motion
+    is planned. A Cartesian velocity command replaces the plan: the desired position integrates it
+    for as long as commands keep coming (``velocity_timeout``), then holds. Times are seconds on the
+    caller's clock; joint readings are resolver increments Theta (rad) from home.
+    """
+
+    def __init__(self, desc, mass=dynamics.MassParameters(), gains=Gains(), max_speed=2.0,
+                 max_acceleration=4 * dynamics.G, velocity_timeout=0.1, region=workspace.Workspace()):
+        if max_speed <= 0 or max_acceleration <= 0:
+            raise ValueError(f"max_speed and max_acceleration must be positive, got {max_speed}, {max_acceleration}")
+        self.mass, self.gains = mass, gains
+        self.set_description(desc)
+        self.max_speed, self.max_acceleration = float(max_speed), float(max_acceleration)
+        self.velocity_timeout, self.region = velocity_timeout, region
+        self.segments = []          # planned segments, oldest first
+        self.hold = None            # desired position when nothing moves (m)
+        self.velocity = None        # (v (3,), time received) in velocity mode
+        self.last_t = None
+
+    def set_description(self, desc):
+        """Use another robot description from the next tick (the plan stays in Cartesian space)."""
+        self.desc = desc
+        self.model = dynamics.SingleRobotDynamics(desc, self.mass)   # per-tick IK, FK, inverse dynamics
+
+    def check_position(self, P, what='goal'):
+        """Raise GoalError unless P is inside the usable workspace of the current description."""
+        P = np.asarray(P, dtype=float)
+        if P.shape != (3,) or not np.all(np.isfinite(P)):
+            raise GoalError(f"{what}: expected three finite coordinates (m), got {P!r}")
+        if not self.region.contains(self.desc, P):
+            raise GoalError(f"{what} ({P[0]:.3f}, {P[1]:.3f}, {P[2]:.3f}) m is outside the usable workspace")
+
+    def add_goal(self, P, t):
+        """Plan a straight segment to P after the current plan (or from where the robot is held)."""
+        P = np.asarray(P, dtype=float)
+        self.check_position(P)
+        if self.hold is None:
+            raise GoalError("goal before the first joint reading: the start position is unknown")
+        self._retire(t)
+        if self.segments and self.velocity is None:
+            start, start_t = self.segments[-1].P1, self.segments[-1].t1
+        else:
+            start, start_t = self.hold, t
+        # a straight segment between two usable points can still cross a hole: check along it
+        for u in np.linspace(0.0, 1.0, 21)[1:-1]:
+            self.check_position(start + u * (P - start), 'path to the goal')
+        self.velocity = None
+        self.segments.append(trajectory.segment(start, P, start_t, self.max_speed, self.max_acceleration))
+
+    def set_velocity(self, v, t):
+        """Follow a Cartesian velocity (m/s, base frame) from now on; it is clipped to max_speed."""
+        v = np.asarray(v, dtype=float)
+        if v.shape != (3,) or not np.all(np.isfinite(v)):
+            raise GoalError(f"velocity command: expected three finite components (m/s), got {v!r}")
+        speed = np.linalg.norm(v)
+        if speed > self.max_speed:
+            v = v * (self.max_speed / speed)
+        if self.segments:
+            self.hold = self.desired(t)[0]
+            self.segments = []
+        self.velocity = (v, t)
+
+    def desired(self, t):
+        """Desired (P, Pd, Pdd) at time t, and advance the held position (velocity mode, finished plan)."""
+        zero = np.zeros(3)
+        if self.velocity is not None:
+            v, received = self.velocity
+            dt = 0.0 if self.last_t is None else max(t - self.last_t, 0.0)
+            if t - received > self.velocity_timeout:
+                self.velocity = None
+                return self.hold, zero, zero
+            nxt = self.hold + v * dt
+            if not self.region.contains(self.desc, nxt):
+                self.velocity = None           # stop at the edge of the workspace rather than leave it
+                return self.hold, zero, zero
+            self.hold = nxt
+            return self.hold, v, zero
+        self._retire(t)
+        if self.segments and self.segments[0].t0 <= t:
+            P, dP, ddP, _ = self.segments[0].sample(t)
+            return P, dP, ddP
+        return self.hold, zero, zero
+
+    def _retire(self, t):
+        """Drop the segments finished by time t; the robot is then held at the last one's end."""
+        while self.segments and self.segments[0].t1 <= t:
+            self.hold = self.segments.pop(0).P1
+
+    def update(self, t, Theta, dTheta=None):
+        """One control tick: resolver increments (rad) and rates (rad/s, only needed when kd > 0).
+
+        Returns (alphad_ref (3,) rad/s for the drives, P_est (3,) m from the forward kinematics of the
+        current description).
+        """
+        alpha = self.desc.theta0 + np.asarray(Theta, dtype=float)
+        P_est = np.array(self.model.forward_kinematics(alpha)[0])
+        if self.hold is None:
+            self.hold = P_est
+        P_d, dP_d, ddP_d = self.desired(t)
+        self.last_t = t
+        alpha_d, dalpha_d, tau_d = self.model.inverse_dynamics(P_d, dP_d, ddP_d)
+        dalpha = np.zeros(3) if dTheta is None else np.asarray(dTheta, dtype=float)
+        return velocity_command(alpha_d, dalpha_d, tau_d, alpha, dalpha, self.gains), P_est
+
+    @property
+    def moving(self):
+        return bool(self.segments) or self.velocity is not None

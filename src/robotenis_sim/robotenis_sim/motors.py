@@ -1,0 +1,149 @@
+"""The simulated motors: the robot's rigid-body dynamics driven by velocity-command drives.
+
+State: the TRUE arm angles alpha (absolute, rad) and rates. Every control period (1 ms) the drives
+hold the last velocity command and apply tau = K_V (alphad_ref - alphad) (dynamics paper, eq. 10),
+continuously, as a drive's inner loop runs much faster than the 1 kHz controller; the torque is
+clipped to what the servo and gearbox deliver. The equations of motion are the Lagrangian model of
+robotenis_control.dynamics (eqs. 1-9) in the independent coordinates alpha, integrated with classical
+RK4 (global error O(dt^4)); ``substeps`` splits the period.
+
+The resolvers report Theta = theta_motor - theta0, quantised to the counts of a resolver-to-digital
+converter on the motor shaft seen through the gearbox, with white noise before quantisation. The
+motor angle is the arm angle unless a ``joint_effects`` callable says otherwise (gear error,
+backlash, compliance: the truth's effects, applied between the true joint and the reading).
+
+Until the first velocity command the holding brakes are on and the robot does not move.
+"""
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from robotenis_control.dynamics import SingleRobotDynamics
+
+
+@dataclass(frozen=True)
+class DriveParameters:
+    """K_V (N m s/rad, joint side, eq. 10) and the peak joint torque (N m) of servo + 10:1 gearbox.
+
+    K_V = 60 gives the velocity loop a bandwidth K_V / I of about 200 rad/s on the ~0.3 kg m^2 a
+    joint sees (arm, rotor, forearm and a third of the platform).
+    """
+
+    K_V: float = 60.0
+    torque_limit: float = 300.0
+
+
+@dataclass(frozen=True)
+class ResolverParameters:
+    """Resolver counts per motor revolution, gear ratio, and the reading's noise (rad, joint side).
+
+    16384 counts (14-bit converter) through a 10:1 gearbox: one count is 2 pi / 163840 = 3.8e-5 rad
+    at the joint, 0.019 mm at the end of a 0.5 m arm (calibration paper, section 6.1: the encoders
+    cannot guarantee better than 0.02 mm). The noise, 2e-5 rad, is the one calibration assumes
+    (robotenis_kinematics.synthetic.NoiseModel.sigma_resolver).
+    """
+
+    counts_per_rev: int = 16384
+    gear_ratio: float = 10.0
+    noise: float = 2e-5
+
+    @property
+    def resolution(self):
+        """One count at the joint (rad)."""
+        return 2 * math.pi / (self.counts_per_rev * self.gear_ratio)
+
+
+def rk4_step(f, t, alpha, dalpha, dt):
+    """One classical Runge-Kutta step of alphadd = f(t, alpha, alphad) (lists of 3 floats).
+
+    Returns (alpha, alphad) at t + dt; local error O(dt^5), global O(dt^4).
+    """
+    def add(x, k, s):
+        return [x[0] + s * k[0], x[1] + s * k[1], x[2] + s * k[2]]
+
+    k1v, k1a = dalpha, f(t, alpha, dalpha)
+    k2v = add(dalpha, k1a, dt / 2)
+    k2a = f(t + dt / 2, add(alpha, k1v, dt / 2), k2v)
+    k3v = add(dalpha, k2a, dt / 2)
+    k3a = f(t + dt / 2, add(alpha, k2v, dt / 2), k3v)
+    k4v = add(dalpha, k3a, dt)
+    k4a = f(t + dt, add(alpha, k3v, dt), k4v)
+    s = dt / 6
+    return ([alpha[j] + s * (k1v[j] + 2 * k2v[j] + 2 * k3v[j] + k4v[j]) for j in range(3)],
+            [dalpha[j] + s * (k1a[j] + 2 * k2a[j] + 2 * k3a[j] + k4a[j]) for j in range(3)])
+
+
+class SimulatedMotors:
+    """The true robot with its drives and resolvers, stepped one control period at a time.
+
+    Parameters
+    ----------
+    geometry : RobotDescription-like (phi, H, a, b, h, theta0 arrays), the TRUE geometry.
+    mass : robotenis_control.dynamics.MassParameters, the TRUE masses.
+    Theta_start : resolver increments (rad) of the initial rest position; home by default.
+    joint_effects : callable (alpha, alphad) -> motor angles (absolute, rad), or None (motor = arm).
+    """
+
+    def __init__(self, geometry, mass, drives=DriveParameters(), resolver=ResolverParameters(),
+                 dt=1e-3, substeps=1, rng=None, Theta_start=(0.0, 0.0, 0.0), joint_effects=None):
+        if dt <= 0 or substeps < 1:
+            raise ValueError(f"dt must be > 0 and substeps >= 1 (got dt={dt}, substeps={substeps})")
+        self.model = SingleRobotDynamics(geometry, mass)
+        self.theta0 = np.asarray(geometry.theta0, dtype=float)
+        self.drives, self.resolver = drives, resolver
+        self.dt, self.substeps = float(dt), int(substeps)
+        self.rng = rng if rng is not None else np.random.default_rng()
+        self.joint_effects = joint_effects
+        self.t = 0.0
+        self.alpha = [float(v) for v in self.theta0 + np.asarray(Theta_start, dtype=float)]
+        self.dalpha = [0.0, 0.0, 0.0]
+        self.command = [0.0, 0.0, 0.0]
+        self.brakes = True
+        self._last_reading = self._quantised(self._motor_angles() - self.theta0)
+
+    def set_command(self, dalpha_ref):
+        """Latch the drives' velocity command (rad/s, joint side); the first one releases the brakes."""
+        ref = [float(v) for v in dalpha_ref]
+        if len(ref) != 3 or not all(math.isfinite(v) for v in ref):
+            raise ValueError(f"velocity command: expected three finite values, got {dalpha_ref!r}")
+        self.command = ref
+        self.brakes = False
+
+    def torque(self, dalpha):
+        """Drive torques (eq. 10) for the latched command, clipped to the torque limit (N m)."""
+        K, lim = self.drives.K_V, self.drives.torque_limit
+        return [min(max(K * (self.command[j] - dalpha[j]), -lim), lim) for j in range(3)]
+
+    def _accelerations(self, t, alpha, dalpha):
+        return self.model.accelerations(alpha, dalpha, self.torque(dalpha))[0]
+
+    def step(self):
+        """Advance one control period (dt), unless the brakes hold the robot."""
+        if not self.brakes:
+            h = self.dt / self.substeps
+            for k in range(self.substeps):
+                self.alpha, self.dalpha = rk4_step(self._accelerations, self.t + k * h, self.alpha, self.dalpha, h)
+        self.t += self.dt
+
+    def _motor_angles(self):
+        alpha = np.asarray(self.alpha)
+        return alpha if self.joint_effects is None else np.asarray(self.joint_effects(alpha, np.asarray(self.dalpha)))
+
+    def _quantised(self, Theta):
+        q = self.resolver.resolution
+        return np.round(Theta / q) * q
+
+    def read(self):
+        """(Theta, dTheta): resolver increments (rad, quantised and noisy) and the drives' speed
+        estimate, the difference of the last two readings over dt (rad/s)."""
+        noise = self.rng.normal(scale=self.resolver.noise, size=3) if self.resolver.noise > 0 else 0.0
+        Theta = self._quantised(self._motor_angles() - self.theta0 + noise)
+        dTheta = (Theta - self._last_reading) / self.dt
+        self._last_reading = Theta
+        return Theta, dTheta
+
+    def effector(self):
+        """TRUE effector position and velocity (m, m/s, base frame): ground truth for scoring only."""
+        _, P, dP = self.model.accelerations(self.alpha, self.dalpha, [0.0, 0.0, 0.0])
+        return np.array(P), np.array(dP)
