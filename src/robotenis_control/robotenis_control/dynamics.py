@@ -310,32 +310,53 @@ class SingleRobotDynamics:
     def accelerations(self, alpha, dalpha, tau):
         """(alphadd, P, Pd) for arm angles, rates and joint torques (sequences of 3 floats).
 
-        The reduced equations of ``forward_dynamics``, with A^-1 and the 3x3 solve by cofactors.
+        The reduced equations of ``forward_dynamics``, written out for speed (the simulator calls this
+        four times per 1 ms step). With d_i = C_i - B_i, n_i = d_j x d_k ((i, j, k) cyclic) and
+        D = d_1 . (d_2 x d_3), the inverse of A (rows 2 d_i^T) has columns n_i / (2 D), so the columns
+        of J = -A^-1 diag(beta) are J_i = a_i (d_i . t_i) n_i / D and c = -A^-1 gamma = -sum gamma_i n_i / (2 D).
         """
         P, Q, r, t = self.forward_kinematics(alpha)
-        dv = [[P[j] - Q[i][j] for j in range(3)] for i in range(3)]          # d_i = C_i - B_i
-        Ainv = _inverse3([[2 * v for v in row] for row in dv])
-        beta = [-2 * self.a[i] * _dot(dv[i], t[i]) for i in range(3)]
-        J = [[-Ainv[r_][c] * beta[c] for c in range(3)] for r_ in range(3)]   # Pd = J alphad
-        dP = [_dot(J[j], dalpha) for j in range(3)]
-        gamma = []
+        px, py, pz = P
+        d = [(px - q[0], py - q[1], pz - q[2]) for q in Q]
+        n = [_cross(d[(i + 1) % 3], d[(i + 2) % 3]) for i in range(3)]
+        D = d[0][0] * n[0][0] + d[0][1] * n[0][1] + d[0][2] * n[0][2]
+        if D == 0.0:
+            raise ZeroDivisionError("parallel singularity: the forearms are coplanar")
+        Jc, dP = [], [0.0, 0.0, 0.0]
         for i in range(3):
+            di, ti, ni = d[i], t[i], n[i]
+            s = self.a[i] * (di[0] * ti[0] + di[1] * ti[1] + di[2] * ti[2]) / D
+            col = (s * ni[0], s * ni[1], s * ni[2])
+            Jc.append(col)
+            w = dalpha[i]
+            dP[0] += col[0] * w
+            dP[1] += col[1] * w
+            dP[2] += col[2] * w
+        c = [0.0, 0.0, 0.0]
+        hP = [0.0, 0.0, -self.g_platform]
+        for i in range(3):
+            di, ri, ti, ni = d[i], r[i], t[i], n[i]
             w = self.a[i] * dalpha[i]
-            dd = [dP[j] - w * t[i][j] for j in range(3)]
-            gamma.append(2 * _dot(dd, dd) + 2 * w * dalpha[i] * _dot(dv[i], r[i]))
-        c = [-_dot(Ainv[j], gamma) for j in range(3)]                          # Pdd = J alphadd + c
-        Jc = [[J[0][k], J[1][k], J[2][k]] for k in range(3)]                   # columns of J
-        # t_i . J[:, k] appears in both cross terms of the reduced mass matrix
-        tJ = [[_dot(t[i], Jc[k]) for k in range(3)] for i in range(3)]
-        M = [[self.k[i] * tJ[i][k] + self.k[k] * tJ[k][i] + self.M_PP * _dot(Jc[i], Jc[k])
-              for k in range(3)] for i in range(3)]
+            e0, e1, e2 = dP[0] - w * ti[0], dP[1] - w * ti[1], dP[2] - w * ti[2]
+            gamma = 2 * (e0 * e0 + e1 * e1 + e2 * e2) + 2 * w * dalpha[i] * (di[0] * ri[0] + di[1] * ri[1] + di[2] * ri[2])
+            f = -gamma / (2 * D)
+            kw = self.k[i] * dalpha[i] * dalpha[i]
+            for j in range(3):
+                c[j] += f * ni[j]
+                hP[j] -= kw * ri[j]
+        # reduced mass matrix (symmetric) and right-hand side, dot products written out
+        tJ = [[ti[0] * col[0] + ti[1] * col[1] + ti[2] * col[2] for col in Jc] for ti in t]
+        JJ = [[ci[0] * ck[0] + ci[1] * ck[1] + ci[2] * ck[2] for ck in Jc] for ci in Jc]
+        k, M_PP = self.k, self.M_PP
+        M = [[k[i] * tJ[i][j] + k[j] * tJ[j][i] + M_PP * JJ[i][j] for j in range(3)] for i in range(3)]
+        rhs = []
         for i in range(3):
             M[i][i] += self.M_aa[i]
-        # h_P = -sum_i k_i alphad_i^2 r_i - g_platform z
-        hP = [-sum(self.k[i] * dalpha[i] ** 2 * r[i][j] for i in range(3)) for j in range(3)]
-        hP[2] -= self.g_platform
-        rhs = [tau[i] + self.g_arm[i] * math.cos(alpha[i])
-               - _dot(Jc[i], hP) - self.k[i] * _dot(t[i], c) - self.M_PP * _dot(Jc[i], c) for i in range(3)]
+            ci, ti = Jc[i], t[i]
+            rhs.append(tau[i] + self.g_arm[i] * math.cos(alpha[i])
+                       - (ci[0] * hP[0] + ci[1] * hP[1] + ci[2] * hP[2])
+                       - k[i] * (ti[0] * c[0] + ti[1] * c[1] + ti[2] * c[2])
+                       - M_PP * (ci[0] * c[0] + ci[1] * c[1] + ci[2] * c[2]))
         return _solve3(M, rhs), P, dP
 
 

@@ -9,7 +9,7 @@ RK4 (global error O(dt^4)); ``substeps`` splits the period.
 
 The resolvers report Theta = theta_motor - theta0, quantised to the counts of a resolver-to-digital
 converter on the motor shaft seen through the gearbox, with white noise before quantisation. The
-motor angle is the arm angle unless a ``joint_effects`` callable says otherwise (gear error,
+increments are alpha - theta0 unless a ``joint_effects`` callable says otherwise (gear error,
 backlash, compliance: the truth's effects, applied between the true joint and the reading).
 
 Until the first velocity command the holding brakes are on and the robot does not move.
@@ -82,7 +82,8 @@ class SimulatedMotors:
     geometry : RobotDescription-like (phi, H, a, b, h, theta0 arrays), the TRUE geometry.
     mass : robotenis_control.dynamics.MassParameters, the TRUE masses.
     Theta_start : resolver increments (rad) of the initial rest position; home by default.
-    joint_effects : callable (alpha, alphad) -> motor angles (absolute, rad), or None (motor = arm).
+    joint_effects : callable (alpha, alphad) -> resolver increments before quantisation and noise (rad),
+        or None (alpha - theta0); e.g. robotenis_sim.truth.JointReadings.
     """
 
     def __init__(self, geometry, mass, drives=DriveParameters(), resolver=ResolverParameters(),
@@ -100,7 +101,7 @@ class SimulatedMotors:
         self.dalpha = [0.0, 0.0, 0.0]
         self.command = [0.0, 0.0, 0.0]
         self.brakes = True
-        self._last_reading = self._quantised(self._motor_angles() - self.theta0)
+        self._last_reading = self._quantised(self._increments())
 
     def set_command(self, dalpha_ref):
         """Latch the drives' velocity command (rad/s, joint side); the first one releases the brakes."""
@@ -126,9 +127,11 @@ class SimulatedMotors:
                 self.alpha, self.dalpha = rk4_step(self._accelerations, self.t + k * h, self.alpha, self.dalpha, h)
         self.t += self.dt
 
-    def _motor_angles(self):
+    def _increments(self):
         alpha = np.asarray(self.alpha)
-        return alpha if self.joint_effects is None else np.asarray(self.joint_effects(alpha, np.asarray(self.dalpha)))
+        if self.joint_effects is None:
+            return alpha - self.theta0
+        return np.asarray(self.joint_effects(alpha, np.asarray(self.dalpha)))
 
     def _quantised(self, Theta):
         q = self.resolver.resolution
@@ -138,7 +141,7 @@ class SimulatedMotors:
         """(Theta, dTheta): resolver increments (rad, quantised and noisy) and the drives' speed
         estimate, the difference of the last two readings over dt (rad/s)."""
         noise = self.rng.normal(scale=self.resolver.noise, size=3) if self.resolver.noise > 0 else 0.0
-        Theta = self._quantised(self._motor_angles() - self.theta0 + noise)
+        Theta = self._quantised(self._increments() + noise)
         dTheta = (Theta - self._last_reading) / self.dt
         self._last_reading = Theta
         return Theta, dTheta

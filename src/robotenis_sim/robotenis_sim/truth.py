@@ -81,6 +81,19 @@ class Truth:
             sagged = theta + c * self.gravity_torque(P, sagged)
         return sagged
 
+    def increments(self, arm, direction, P):
+        """Resolver increments (before quantisation and noise) for TRUE arm angles at effector P.
+
+        The exact inverse of ``arm_angles`` followed by ``reading``: the sag is c_i tau_g,i at the
+        sagged pose itself, and the motor leads the arm by half the backlash in ``direction``.
+        """
+        theta = np.asarray(arm, dtype=float)
+        c = np.asarray(self.effects.get('gravity_compliance', np.zeros(3)), dtype=float)
+        if np.any(c):
+            theta = theta - c * self.gravity_torque(P, theta)
+        motor = theta + 0.5 * np.asarray(self.effects.get('backlash', np.zeros(3))) * direction
+        return self.reading(motor)
+
     def reading(self, motor):
         """Resolver increments the drives report for motor angles (absolute): gear-ratio error applied."""
         s = np.asarray(self.effects.get('joint_scale', np.zeros(3)), dtype=float)
@@ -161,3 +174,21 @@ def _plain(obj):
 def default_path():
     here = os.path.dirname(os.path.abspath(__file__))
     return os.path.normpath(os.path.join(here, '..', 'config', 'truth_default.yaml'))
+
+
+class JointReadings:
+    """The hook between the simulated arms and the resolvers: ``(alpha, alphad) -> increments``.
+
+    Tracks each joint's motion direction (the sign of its last speed above ``min_speed`` rad/s, for
+    backlash) and applies the truth's joint effects; without effects the increments are alpha - theta0.
+    """
+
+    def __init__(self, truth, min_speed=1e-3):
+        self.truth, self.min_speed = truth, min_speed
+        self.direction = np.ones(3)
+
+    def __call__(self, alpha, dalpha):
+        moving = np.abs(dalpha) > self.min_speed
+        self.direction = np.where(moving, np.sign(dalpha), self.direction)
+        P = delta.forward(self.truth.geometry, alpha) if 'gravity_compliance' in self.truth.effects else None
+        return self.truth.increments(alpha, self.direction, P)

@@ -91,7 +91,7 @@ def test_brakes_hold_until_the_first_command(desc):
 def test_joint_effects_hook_sits_between_joint_and_reading(desc):
     offset = np.array([1e-3, 0, -2e-3])
     sim = motors.SimulatedMotors(desc, dyn.MassParameters(), resolver=motors.ResolverParameters(noise=0),
-                                 joint_effects=lambda alpha, dalpha: alpha + offset)
+                                 joint_effects=lambda alpha, dalpha: alpha - desc.theta0 + offset)
     q = sim.resolver.resolution
     np.testing.assert_allclose(sim.read()[0], np.round(offset / q) * q)
 
