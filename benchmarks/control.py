@@ -23,7 +23,7 @@ from robotenis_control import controller as ctl  # noqa: E402
 from robotenis_control import dynamics as dyn  # noqa: E402
 from robotenis_control import trajectory as tr  # noqa: E402
 from robotenis_kinematics import delta, description, workspace  # noqa: E402
-from robotenis_sim import motors, sim_motors_node, truth as sim_truth  # noqa: E402
+from robotenis_sim import motors, truth as sim_truth  # noqa: E402
 
 REPORT = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 'report')
 
@@ -108,7 +108,7 @@ def demanding_waypoints(desc, n=20, seed=3):
 
 def motion_study(nominal):
     truth = sim_truth.load()
-    mass = sim_motors_node.true_masses(truth)
+    mass = motors.true_masses(truth)
     points = demanding_waypoints(nominal)
     v_max, a_max = 4.0, 10 * dyn.G
     print(f'2. demanding motion: 20 chained segments of 350-450 mm, v_max {v_max} m/s, a_max 10 g; '

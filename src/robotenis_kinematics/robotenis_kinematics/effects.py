@@ -123,6 +123,25 @@ def model_joint_angles(desc, fx, Theta, direction, P, load=None):
     return theta, derivative
 
 
+def increments_for(desc, theta, direction, P):
+    """Resolver increments Theta (..., 3) that give the arm angles theta under the description's joint
+    effects: the inverse of ``model_joint_angles``, for commanding a robot with a calibrated model.
+
+    ``direction`` is the sign of each joint's motion into this pose and P the effector position
+    (for compliance). Theta = (theta - theta0 + w/2 dir - c tau_g(P, theta0 + Theta)) / (1 + k), solved
+    by fixed point: the sag changes by c dtau/dtheta ~ 1e-3 of a step, so three passes are exact.
+    """
+    fx = parameters(desc)
+    k = fx.get('joint_scale', np.zeros(3))
+    lead = theta - desc.theta0 + 0.5 * fx.get('backlash', np.zeros(3)) * direction
+    Theta = lead / (1 + k)
+    if 'gravity_compliance' in fx:
+        for _ in range(3):
+            sag = fx['gravity_compliance'] * gravity_torque(desc, P, desc.theta0 + Theta, gravity_load(desc))
+            Theta = (lead - sag) / (1 + k)
+    return Theta
+
+
 def rotation_vector_matrix(r):
     """Rotation matrix exp([r]x) of a rotation vector r (rad), Rodrigues' formula."""
     r = np.asarray(r, dtype=float)

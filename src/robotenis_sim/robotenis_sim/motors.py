@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robotenis_control.dynamics import SingleRobotDynamics
+from robotenis_control.dynamics import MassParameters, SingleRobotDynamics
 
 
 @dataclass(frozen=True)
@@ -150,3 +150,15 @@ class SimulatedMotors:
         """TRUE effector position and velocity (m, m/s, base frame): ground truth for scoring only."""
         _, P, dP = self.model.accelerations(self.alpha, self.dalpha, [0.0, 0.0, 0.0])
         return np.array(P), np.array(dP)
+
+
+def true_masses(truth):
+    """MassParameters of the real robot from the truth's static gravity load (arm, platform, kg).
+
+    The forearm (1.315 kg) and the camera (0.05 kg) are as in the paper; the arm and platform masses
+    follow from arm = m_a/2 + m_b/2 and platform = m_c + m_camera + 3 m_b/2.
+    """
+    nominal = MassParameters()
+    load = truth.gravity_load
+    return MassParameters(m_a=2 * load.arm - nominal.m_b,
+                          m_c=load.platform - 1.5 * nominal.m_b - nominal.m_camera)

@@ -35,20 +35,9 @@ from robotenis_control.dynamics import MassParameters
 from robotenis_kinematics import description
 from robotenis_kinematics.description import DescriptionError
 from robotenis_sim import motors, truth as sim_truth
+from robotenis_sim.motors import true_masses
 
 JOINTS = ('motor_1', 'motor_2', 'motor_3')
-
-
-def true_masses(truth):
-    """MassParameters of the real robot from the truth's static gravity load (arm, platform, kg).
-
-    The forearm (1.315 kg) and the camera (0.05 kg) are as in the paper; the arm and platform masses
-    follow from arm = m_a/2 + m_b/2 and platform = m_c + m_camera + 3 m_b/2.
-    """
-    nominal = MassParameters()
-    load = truth.gravity_load
-    return MassParameters(m_a=2 * load.arm - nominal.m_b,
-                          m_c=load.platform - 1.5 * nominal.m_b - nominal.m_camera)
 
 
 class SimMotorsNode(Node):
