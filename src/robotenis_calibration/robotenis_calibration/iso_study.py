@@ -208,10 +208,11 @@ def plot_maps(maps, plate, path):
             ax = axes[row, k]
             image = ax.imshow(AD[k] * 1e3, vmin=0, vmax=2, cmap='jet', interpolation='bilinear',
                               extent=extent_of(k), origin='upper')
-            ax.set_title(f'{name}: x = {plate.centres[k, 0, 0, 0] * 1e3:.0f} mm' if k == 0
-                         else f'x = {plate.centres[k, 0, 0, 0] * 1e3:.0f} mm', fontsize=9)
+            plane = f'plate at x = {plate.centres[k, 0, 0, 0] * 1e3:.0f} mm'
+            ax.set_title(f'{name}\n{plane}' if k == 0 else plane, fontsize=9)
             ax.set_xlabel('y (mm)', fontsize=8)
-            ax.set_ylabel('z (mm, down)', fontsize=8)
+            if k == 0:
+                ax.set_ylabel('z (mm, down)', fontsize=8)
         axes[row, -1].text(1.05, 0.5, f'mean {AD.mean() * 1e3:.3f} mm', transform=axes[row, -1].transAxes,
                            rotation=90, va='center')
     fig.colorbar(image, ax=axes.ravel().tolist(), label='distance accuracy AD (mm)', shrink=0.6)

@@ -10,3 +10,7 @@ JACOBIAN_MAX = 0.015
 TABLE4 = {1.0: ((0.032, 0.025, 0.114), 0.07041), 2.0: ((0.039, 0.034, 0.121), 0.07512)}
 # Figures 9 and 10: mean positioning distance accuracy over the five planes (real robot).
 DISTANCE_ACCURACY_MEAN = {'nominal': 1.468, 'calibrated': 0.583}
+# Table 5 (section 6.2.2): tracking error mean (mm) over 10 tests of 5,000 samples, per maximum ball speed (mm/s).
+TABLE5_SPEEDS = [500, 750, 1000, 1250, 1500]
+TABLE5_NOMINAL = [4.54, 7.42, 12.76, 20.14, 30.47]
+TABLE5_CALIBRATED = [4.47, 7.32, 12.61, 19.84, 30.14]

@@ -8,7 +8,7 @@ def test_quick_report_has_every_section_and_its_figures(tmp_path):
     path = report.build(str(tmp_path), quick=True, say=lambda text: None)
     page = open(path).read()
     for title in ('Identification beside', 'The residual loop', 'Choosing the poses', 'The Jacobian study',
-                  'Static tests and tracking'):
+                  'Static tests, ISO 9283', 'Tracking'):
         assert title in page
     for image in re.findall(r'<img src="([^"]+)"', page):
         assert (tmp_path / image).stat().st_size > 10_000
@@ -16,3 +16,6 @@ def test_quick_report_has_every_section_and_its_figures(tmp_path):
     rows = re.findall(r'<tr><td>(\w+)</td><td>(\d+)/(\d+)</td>', page)
     assert {r[0] for r in rows} == set(EFFECTS)
     assert all(r[1] == r[2] for r in rows)
+    # The static tests: the calibrated models position better than the nominal one on the plate.
+    means = dict(re.findall(r'<tr><td>([\w ()-]+)</td><td>([\d.]+)</td><td>[\d.]+</td><td>[\d.]+</td></tr>', page))
+    assert float(means['final (residual loop)']) < float(means['plain 15-parameter']) < float(means['nominal'])
