@@ -15,14 +15,18 @@ which gives tau = tau_d + K_V K_p e + K_V (1 + K_d) ed, a PD around the model's 
 derivative gain the drive provides by itself (so K_d = 0 is a sensible default and the controller then
 needs no velocity measurement). tau_d comes from the inverse dynamics (eqs. 4-5) of the desired
 Cartesian motion; IK, Jacobians and dynamics all use the robot description in use (nominal or
-calibrated), which can be replaced while running.
+calibrated), which can be replaced while running. A calibrated description's joint effects (gear
+ratio, backlash, compliance) turn the readings into arm angles before the law compares them.
 """
 from dataclasses import dataclass
 
 import numpy as np
 
 from robotenis_control import dynamics, trajectory
-from robotenis_kinematics import workspace
+from robotenis_kinematics import effects, workspace
+
+JOINT_EFFECTS = ('joint_scale', 'backlash', 'gravity_compliance')
+MOVING = 1e-3   # rad/s: a joint faster than this sets its motion direction (for backlash)
 
 
 @dataclass(frozen=True)
@@ -81,6 +85,8 @@ class MotionController:
         """Use another robot description from the next tick (the plan stays in Cartesian space)."""
         self.desc = desc
         self.model = dynamics.SingleRobotDynamics(desc, self.mass)   # per-tick IK, FK, inverse dynamics
+        self.joint_fx = {k: v for k, v in effects.parameters(desc).items() if k in JOINT_EFFECTS}
+        self.direction = np.ones(3)
 
     def check_position(self, P, what='goal'):
         """Raise GoalError unless P is inside the usable workspace of the current description."""
@@ -152,7 +158,7 @@ class MotionController:
         Returns (alphad_ref (3,) rad/s for the drives, P_est (3,) m from the forward kinematics of the
         current description).
         """
-        alpha = self.desc.theta0 + np.asarray(Theta, dtype=float)
+        alpha = self.arm_angles(np.asarray(Theta, dtype=float), dTheta)
         P_est = np.array(self.model.forward_kinematics(alpha)[0])
         if self.hold is None:
             self.hold = P_est
@@ -161,6 +167,18 @@ class MotionController:
         alpha_d, dalpha_d, tau_d = self.model.inverse_dynamics(P_d, dP_d, ddP_d)
         dalpha = np.zeros(3) if dTheta is None else np.asarray(dTheta, dtype=float)
         return velocity_command(alpha_d, dalpha_d, tau_d, alpha, dalpha, self.gains), P_est
+
+    def arm_angles(self, Theta, dTheta):
+        """Arm angles for the readings under the description's joint effects (a calibrated model)."""
+        base = self.desc.theta0 + Theta
+        if not self.joint_fx:
+            return base
+        if dTheta is not None:
+            dTheta = np.asarray(dTheta, dtype=float)
+            self.direction = np.where(np.abs(dTheta) > MOVING, np.sign(dTheta), self.direction)
+        P = np.array(self.model.forward_kinematics(base)[0])
+        return effects.model_joint_angles(self.desc, self.joint_fx, Theta[None], self.direction[None], P[None],
+                                          effects.gravity_load(self.desc))[0][0]
 
     @property
     def moving(self):
