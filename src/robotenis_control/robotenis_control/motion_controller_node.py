@@ -15,9 +15,7 @@ carries the reading's stamp). The description is reloaded by the ~/reload_descri
 import sys
 
 import numpy as np
-import rclpy
 from geometry_msgs.msg import PointStamped, TwistStamped
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.time import Time
 from rclpy.qos import DurabilityPolicy, QoSProfile
@@ -29,21 +27,10 @@ from std_srvs.srv import Trigger
 from robotenis_control import controller as ctl
 from robotenis_kinematics import description
 from robotenis_kinematics.description import DescriptionError
+from robotenis_kinematics.ros import JOINTS, joint_vector, spin
 
-JOINTS = ('motor_1', 'motor_2', 'motor_3')
 GAIN_PARAMETERS = ('kp', 'kd', 'kv')
 STALE_READING_S = 0.05   # no joint reading for this long: command zero speed (the drives then brake)
-
-
-def joint_vector(msg, field):
-    """motor_1..3 of a JointState field, whatever the order of the names; None if absent."""
-    values = getattr(msg, field)
-    if len(values) != len(msg.name):
-        return None
-    index = {name: i for i, name in enumerate(msg.name)}
-    if any(j not in index for j in JOINTS):
-        return None
-    return np.array([values[index[j]] for j in JOINTS], dtype=float)
 
 
 class MotionControllerNode(Node):
@@ -179,24 +166,7 @@ class MotionControllerNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    executor = SingleThreadedExecutor()
-    try:
-        node = MotionControllerNode()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except DescriptionError as e:
-        print(f'motion_controller: {e}', file=sys.stderr)
-        return 2
-    finally:
-        executor.shutdown()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return spin(MotionControllerNode, 'motion_controller', (DescriptionError,), args)
 
 
 if __name__ == '__main__':

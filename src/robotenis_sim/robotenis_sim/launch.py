@@ -30,17 +30,30 @@ class NodeSpec:
         return args
 
 
-def default_nodes(truth_path, description_path, use_sim_time=False):
-    """The simulated system: motors and hand camera (truth), detector, controller."""
-    sim = {'use_sim_time': str(use_sim_time).lower()}
+def default_nodes(truth_path, description_path, sim_time=False, calibration=True, extra=None):
+    """The simulated system: motors and hand camera (truth), detector, controller, calibration service.
+
+    Wall clock by default. With ``sim_time`` the simulator owns /clock and steps in lockstep with the
+    controller (one command per reading), every other node runs on /clock: a session then takes as
+    long as the CPU needs and its results do not depend on the load. ``extra`` adds or overrides
+    parameters per node name.
+    """
+    clock = {'use_sim_time': 'true'} if sim_time else {}
     truth = {'truth_path': truth_path} if truth_path else {}
-    return [
-        NodeSpec('sim_motors', 'robotenis_sim', 'sim_motors', {**truth, **sim}),
-        NodeSpec('hand_camera', 'robotenis_sim', 'hand_camera', {**truth, **sim}),
-        NodeSpec('sphere_detector', 'robotenis_vision', 'sphere_detector', sim),
-        NodeSpec('motion_controller', 'robotenis_control', 'motion_controller',
-                 {'description_path': description_path, **sim}),
+    desc = {'description_path': description_path}
+    motors = {'publish_clock': 'true', 'lockstep': 'true', 'speed': '0.0'} if sim_time else {}
+    ticks = {'tick_on_joint_states': 'true'} if sim_time else {}
+    nodes = [
+        NodeSpec('sim_motors', 'robotenis_sim', 'sim_motors', {**truth, **motors}),
+        NodeSpec('hand_camera', 'robotenis_sim', 'hand_camera', {**truth, **clock}),
+        NodeSpec('sphere_detector', 'robotenis_vision', 'sphere_detector', {**desc, **clock}),
+        NodeSpec('motion_controller', 'robotenis_control', 'motion_controller', {**desc, **clock, **ticks}),
     ]
+    if calibration:
+        nodes.append(NodeSpec('calibration', 'robotenis_calibration', 'calibration', {**desc, **clock}))
+    for node in nodes:
+        node.parameters.update((extra or {}).get(node.name, {}))
+    return nodes
 
 
 class Launcher:
@@ -117,13 +130,14 @@ def main(argv=None):
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--truth', default='', help="the simulator's truth file (default: Table 1, no effects)")
     parser.add_argument('--description', default='', help='robot description the system uses (default: nominal)')
-    parser.add_argument('--use-sim-time', action='store_true', help='run on the simulator clock (/clock)')
+    parser.add_argument('--sim-time', action='store_true',
+                        help='run on the simulator clock (/clock), simulator and controller in lockstep')
     args = parser.parse_args(argv)
     from robotenis_kinematics import description
     desc_path = os.path.abspath(args.description) if args.description else description.config_path('nominal.yaml')
     truth_path = os.path.abspath(args.truth) if args.truth else ''
     top = os.environ.get('ROBOTENIS_TOP', os.getcwd())
-    launcher = Launcher(default_nodes(truth_path, desc_path, args.use_sim_time), os.path.join(top, 'install'),
+    launcher = Launcher(default_nodes(truth_path, desc_path, args.sim_time), os.path.join(top, 'install'),
                         os.path.join(top, 'log', 'launch'))
     try:
         launcher.start()

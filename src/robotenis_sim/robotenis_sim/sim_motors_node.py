@@ -22,10 +22,8 @@ import sys
 import time
 
 import numpy as np
-import rclpy
 from geometry_msgs.msg import PointStamped
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -34,10 +32,10 @@ from sensor_msgs.msg import JointState
 from robotenis_control.dynamics import MassParameters
 from robotenis_kinematics import description
 from robotenis_kinematics.description import DescriptionError
+from robotenis_kinematics.ros import JOINTS, spin
 from robotenis_sim import motors, truth as sim_truth
 from robotenis_sim.motors import true_masses
 
-JOINTS = ('motor_1', 'motor_2', 'motor_3')
 
 
 class SimMotorsNode(Node):
@@ -152,24 +150,7 @@ class SimMotorsNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    executor = SingleThreadedExecutor()
-    try:
-        node = SimMotorsNode()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (DescriptionError, ValueError) as e:
-        print(f'sim_motors: {e}', file=sys.stderr)
-        return 2
-    finally:
-        executor.shutdown()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return spin(SimMotorsNode, 'sim_motors', (DescriptionError, ValueError), args)
 
 
 if __name__ == '__main__':
