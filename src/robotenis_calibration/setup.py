@@ -25,6 +25,9 @@ setup(
         'console_scripts': [
             'demo = robotenis_calibration.demo:main',
             'report = robotenis_calibration.report:main',
+            'calibrate = robotenis_calibration.calibrate_cli:main',
+            'replay = robotenis_calibration.replay:main',
+            'calibration = robotenis_calibration.calibration_node:main',
         ],
     },
 )

@@ -1,0 +1,221 @@
+"""rosbag2 bags with MCAP storage: writing a session, and reading whatever of a bag survived.
+
+Writing (BagWriter): rosbag2 format version 9, MCAP storage with zstd-compressed chunks (what
+rosbag2's own MCAP plugin writes), so ``ros2 bag info/play`` and Foxglove open the bags. Messages are
+stored as the CDR bytes the caller gives. The project's own types (robotenis_interfaces) are
+registered in the typestore from their .msg files, found in the installed interfaces package or,
+without a build, in the source tree.
+
+Reading (BagReader): rosbags' AnyReader on a whole bag. A bag whose recorder died has an MCAP file
+cut short (no footer) and maybe no metadata.yaml; AnyReader refuses it, so the reader falls back to
+the ``mcap`` library's stream reader, which yields every whole record before the cut (the chunk being
+written when the file was cut is lost), and says in ``notes`` how many messages it recovered.
+Message times: the header stamp for messages that have a header (when the recorder stamped it),
+otherwise the time the message was recorded.
+"""
+import functools
+import os
+import struct
+from collections import Counter
+from pathlib import Path
+from typing import NamedTuple
+
+from mcap.exceptions import McapError
+from mcap.records import Channel, Message, Schema
+from mcap.stream_reader import StreamReader
+from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+INTERFACES = 'robotenis_interfaces'
+
+
+def interface_msg_dir():
+    """Folder of the .msg files of robotenis_interfaces: installed share folder, else the source tree."""
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        folder = os.path.join(get_package_share_directory(INTERFACES), 'msg')
+    except Exception:  # not built, or ament_index not importable: the source tree has the same files
+        folder = os.path.join(os.path.dirname(os.path.realpath(__file__)), '..', '..', INTERFACES, 'msg')
+    if not os.path.isdir(folder):
+        raise FileNotFoundError(f'{INTERFACES}: no msg folder (looked in {os.path.normpath(folder)})')
+    return folder
+
+
+@functools.lru_cache(maxsize=1)
+def typestore():
+    """The ROS 2 Jazzy typestore plus the robotenis_interfaces messages."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    folder = interface_msg_dir()
+    types = {}
+    for name in sorted(os.listdir(folder)):
+        if name.endswith('.msg'):
+            with open(os.path.join(folder, name)) as f:
+                types.update(get_types_from_msg(f.read(), f'{INTERFACES}/msg/{name[:-4]}'))
+    store.register(types)
+    return store
+
+
+def png(pixels):
+    """Lossless PNG bytes of an image array (mono8: (h, w) uint8), for sensor_msgs/CompressedImage."""
+    import cv2
+    ok, data = cv2.imencode('.png', pixels)
+    if not ok:
+        raise ValueError(f'cannot encode an image of shape {pixels.shape} and type {pixels.dtype} as PNG')
+    return data.tobytes()
+
+
+PNG_FORMAT = 'mono8; png compressed mono8'   # CompressedImage.format of a PNG of a mono8 image
+
+
+def serialize(msg, type_name):
+    """CDR bytes of a rosbags message object."""
+    return bytes(typestore().serialize_cdr(msg, type_name))
+
+
+class BagWriter:
+    """Records CDR messages to a new rosbag2 bag directory (MCAP, zstd chunks)."""
+
+    def __init__(self, path):
+        if os.path.exists(path):
+            raise FileExistsError(f'{path}: exists already; a bag is never overwritten')
+        self._writer = Writer(Path(path), version=9, storage_plugin=StoragePlugin.MCAP)
+        self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+        self._writer.open()
+        self._connections = {}
+        self.path = str(path)
+
+    def add_topic(self, topic, type_name):
+        """Declare a topic and its type (e.g. 'sensor_msgs/msg/JointState') before writing to it."""
+        if type_name not in typestore().types:
+            raise ValueError(f'{topic}: unknown message type {type_name!r}')
+        self._connections[topic] = self._writer.add_connection(topic, type_name, typestore=typestore())
+
+    def write(self, topic, stamp_ns, data):
+        """Record one message: its CDR bytes, at ``stamp_ns`` (ns)."""
+        if topic not in self._connections:
+            raise ValueError(f'{topic}: not declared with add_topic')
+        self._writer.write(self._connections[topic], int(stamp_ns), bytes(data))
+
+    def close(self):
+        """Finish the bag (footer, metadata.yaml); closing twice does nothing."""
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+class Record(NamedTuple):
+    """One stored message: topic, type name, time recorded (ns) and CDR bytes."""
+
+    topic: str
+    type_name: str
+    log_ns: int
+    data: bytes
+
+
+class BagReader:
+    """A rosbag2 bag directory opened for reading; ``topics`` {topic: type}, ``counts`` {topic: n}."""
+
+    def __init__(self, bag_dir):
+        self.path = Path(bag_dir)
+        if not self.path.is_dir():
+            raise FileNotFoundError(f'{bag_dir}: no such bag directory')
+        self.notes = []
+        self._any = None
+        self._files = sorted(self.path.glob('*.mcap'))
+        try:
+            self._any = AnyReader([self.path], default_typestore=typestore())
+            self._any.open()
+        except (AnyReaderError, OSError) as e:
+            self._any = None
+            if not self._files:
+                raise ValueError(f'{bag_dir}: not a readable rosbag2 bag ({e})') from e
+            self.notes.append(f'{bag_dir}: cannot be read whole ({e}); reading every whole MCAP record')
+            self.topics, self.counts = self._scan()
+        else:
+            self.topics = {c.topic: c.msgtype for c in self._any.connections}
+            self.counts = {t: sum(c.msgcount for c in self._any.connections if c.topic == t) for t in self.topics}
+
+    def close(self):
+        if self._any is not None:
+            self._any.close()
+            self._any = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def _stream(self, seen=None):
+        """(topic, type name, mcap Message) of every whole message record of the MCAP files, in file
+        order; the topics declared on the way go to ``seen`` {topic: type}."""
+        for path in self._files:
+            schemas, channels = {}, {}
+            with open(path, 'rb') as f:
+                try:
+                    for record in StreamReader(f).records:
+                        if isinstance(record, Schema):
+                            schemas[record.id] = record.name
+                        elif isinstance(record, Channel):
+                            channels[record.id] = (record.topic, schemas.get(record.schema_id, ''))
+                            if seen is not None:
+                                seen[record.topic] = channels[record.id][1]
+                        elif isinstance(record, Message) and record.channel_id in channels:
+                            yield (*channels[record.channel_id], record)
+                except (McapError, struct.error):
+                    continue  # the cut: every whole record before it has been read
+
+    def _scan(self):
+        """Topics, types and message counts of a bag AnyReader refused (one pass over its records)."""
+        topics = {}
+        counts = Counter(topic for topic, _, _ in self._stream(topics))
+        self.notes.append(f'{sum(counts.values())} messages recovered from {self.path} (whole records only)')
+        return topics, {t: counts.get(t, 0) for t in topics}
+
+    def records(self, topics=None, progress=None, steps=100):
+        """Stored messages of ``topics`` (all when None) as Records; time order for a whole bag, file
+        order for a truncated one. ``progress(done, total)`` is called ``steps`` times on the way."""
+        wanted = set(self.topics) if topics is None else set(topics) & set(self.topics)
+        total = sum(self.counts[t] for t in wanted)
+        step = max(1, total // steps)
+        for done, record in enumerate(self._records(wanted), start=1):
+            if progress and done % step == 0:
+                progress(done, total)
+            yield record
+
+    def _records(self, wanted):
+        if self._any is not None:
+            connections = [c for c in self._any.connections if c.topic in wanted]
+            for c, log_ns, data in self._any.messages(connections=connections):
+                yield Record(c.topic, c.msgtype, log_ns, bytes(data))
+        else:
+            for topic, type_name, m in self._stream():
+                if topic in wanted:
+                    yield Record(topic, type_name, m.log_time, bytes(m.data))
+
+    def messages(self, topics=None, progress=None, steps=100):
+        """(topic, type name, stamp_ns, message) of ``topics``: deserialized, with the header stamp
+        when the message has a non-zero one, the recording time otherwise."""
+        store = typestore()
+        for r in self.records(topics, progress, steps):
+            try:
+                msg = store.deserialize_cdr(r.data, r.type_name)
+            except KeyError as e:
+                raise ValueError(f'{r.topic}: message type {r.type_name!r} is not known to the typestore') from e
+            yield r.topic, r.type_name, stamp_ns(msg, r.log_ns), msg
+
+
+def stamp_ns(msg, log_ns):
+    """The header stamp of ``msg`` in ns, or ``log_ns`` when it has no header or a zero stamp."""
+    header = getattr(msg, 'header', None)
+    if header is None or (header.stamp.sec == 0 and header.stamp.nanosec == 0):
+        return log_ns
+    return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec

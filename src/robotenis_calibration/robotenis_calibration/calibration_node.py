@@ -1,0 +1,247 @@
+"""The `calibration` node: the Calibrate service that runs a session and calibrates from its bag.
+
+A request plans the poses (robotenis_calibration.poses), then the session runner commands each one on
+/goal, waits for rest and settling, and counts detections, while every message of the session is
+recorded to a rosbag2 bag (MCAP, robotenis_calibration.bag_io): the declared description, joint states,
+sphere positions and detections, camera info, goals, rest markers, progress, and of the camera images
+only the first ``images_per_pose`` frames of each rest, as lossless PNG (sensor_msgs/CompressedImage on
+``image_topic``/compressed): enough to check or re-run the detector on every pose, at a small share
+of the bag (all frames raw would be 300 kB each at 120 Hz). When the session is over the bag is
+calibrated exactly as `./robotenis calibrate BAG --out RESULT.yaml` would do it
+(robotenis_calibration.pipeline). A second request while a session runs is refused with "busy";
+progress goes to /calibration/progress. On shutdown a bag being recorded is closed, so it stays whole.
+"""
+import array
+import os
+import time
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import PointStamped
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
+from rclpy.serialization import serialize_message
+from rclpy.task import Future
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
+from std_msgs.msg import String
+
+from robotenis_calibration import bag_io, pipeline, poses
+from robotenis_calibration.session_runner import DONE, MEASURING, RunnerConfig, SessionRunner
+from robotenis_interfaces.msg import CalibrationProgress, RestMarker, SphereDetection
+from robotenis_interfaces.srv import Calibrate
+from robotenis_kinematics import description
+
+JOINTS = ('motor_1', 'motor_2', 'motor_3')
+RECORDED = {  # topic -> (message class, ROS type name)
+    '/joint_states': (JointState, 'sensor_msgs/msg/JointState'),
+    '/sphere/position': (PointStamped, 'geometry_msgs/msg/PointStamped'),
+    '/sphere/detection': (SphereDetection, 'robotenis_interfaces/msg/SphereDetection'),
+    '/camera/camera_info': (CameraInfo, 'sensor_msgs/msg/CameraInfo'),
+}
+
+
+def joint_vector(msg, field):
+    """The motor_1..3 values of a JointState field, whatever the order of the names."""
+    values = getattr(msg, field)
+    index = {name: i for i, name in enumerate(msg.name)}
+    if len(values) != len(msg.name) or any(j not in index for j in JOINTS):
+        return None
+    return np.array([values[index[j]] for j in JOINTS], dtype=float)
+
+
+class CalibrationNode(Node):
+    def __init__(self):
+        super().__init__('calibration')
+        self.declare_parameter('description_path', description.config_path('nominal.yaml'))
+        self.declare_parameter('sphere_guess', [0.73, -0.02, 1.37])
+        self.declare_parameter('bags_dir', 'bags')
+        self.declare_parameter('results_dir', 'bags')
+        self.declare_parameter('num_poses', 300)
+        self.declare_parameter('frames_per_pose', 500)
+        self.declare_parameter('settle_time', 4.0)
+        self.declare_parameter('holdout_fraction', 0.3)
+        self.declare_parameter('image_topic', '/camera/image_raw')
+        self.declare_parameter('images_per_pose', 2)
+        self.busy = False
+        self.runner = None
+        self.writer = None
+        self.finished = None
+        self.images_kept = {}           # pose index -> images recorded during its rest
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.goal_pub = self.create_publisher(PointStamped, '/goal', 10)
+        self.progress_pub = self.create_publisher(CalibrationProgress, '/calibration/progress', 10)
+        self.rest_pub = self.create_publisher(RestMarker, '/calibration/rest', 10)
+        self.description_pub = self.create_publisher(String, '/robot_description', latched)
+        for topic, (cls, _) in RECORDED.items():
+            qos = qos_profile_sensor_data if topic.startswith('/camera') else 50
+            self.create_subscription(cls, topic, lambda msg, t=topic: self.on_message(t, msg), qos)
+        self.image_topic = self.get_parameter('image_topic').value
+        self.create_subscription(Image, self.image_topic, self.on_image, qos_profile_sensor_data)
+        # The service awaits the whole session: in its own reentrant group, so that the timer and the
+        # subscriptions (default group) run meanwhile and a second request can be answered "busy".
+        self.create_service(Calibrate, '/calibrate', self.on_calibrate, callback_group=ReentrantCallbackGroup())
+        self.create_timer(0.01, self.on_timer)
+
+    def now(self):
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def record(self, topic, msg):
+        if self.writer is not None:
+            self.writer.write(topic, self.get_clock().now().nanoseconds, serialize_message(msg))
+
+    def on_message(self, topic, msg):
+        self.record(topic, msg)
+        if self.runner is None:
+            return
+        t = self.now()
+        if topic == '/joint_states':
+            Theta, velocity = joint_vector(msg, 'position'), joint_vector(msg, 'velocity')
+            if Theta is not None and velocity is not None:
+                self.runner.joint_state(t, Theta, velocity)
+        elif topic == '/sphere/detection':
+            p = msg.position
+            self.runner.detection(t, np.array([p.x, p.y, p.z]), np.reshape(msg.covariance, (3, 3)))
+
+    def on_image(self, msg):
+        """Record the first images_per_pose mono8 frames of each rest as PNG."""
+        if self.runner is None or self.writer is None or self.runner.state != MEASURING:
+            return
+        index = self.runner.index
+        if self.images_kept.get(index, 0) >= self.get_parameter('images_per_pose').value:
+            return
+        if msg.encoding != 'mono8':
+            self.get_logger().warn(f'{self.image_topic}: {msg.encoding} images are not recorded (mono8 only)',
+                                   throttle_duration_sec=60.0)
+            return
+        pixels = np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(msg.height, msg.step)[:, :msg.width]
+        self.record(self.image_topic + '/compressed',
+                    CompressedImage(header=msg.header, format=bag_io.PNG_FORMAT,
+                                    data=array.array('B', bag_io.png(pixels))))
+        self.images_kept[index] = self.images_kept.get(index, 0) + 1
+
+    def on_timer(self):
+        if self.runner is None:
+            return
+        self.runner.tick(self.now())
+        for kind, value in self.runner.take_actions():
+            self.execute(kind, value)
+
+    def execute(self, kind, value):
+        stamp = self.get_clock().now().to_msg()
+        if kind == 'goal':
+            goal = PointStamped()
+            goal.header.stamp, goal.header.frame_id = stamp, 'base'
+            goal.point.x, goal.point.y, goal.point.z = (float(v) for v in value)
+            self.goal_pub.publish(goal)
+            self.record('/goal', goal)
+        elif kind in ('rest_start', 'rest_end'):
+            marker = RestMarker(pose_index=int(value), start=(kind == 'rest_start'))
+            marker.header.stamp = stamp
+            self.rest_pub.publish(marker)
+            self.record('/calibration/rest', marker)
+        elif kind == 'progress':
+            stage, index, count = value
+            self.publish_progress(stage, index, count, self.runner.fraction)
+        elif kind == 'done' and not self.finished.done():
+            self.finished.set_result(True)
+
+    def publish_progress(self, stage, index, count, fraction, message=''):
+        msg = CalibrationProgress(stage=stage, pose_index=int(index), pose_count=int(count),
+                                  fraction=float(fraction), message=message)
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.progress_pub.publish(msg)
+        self.record('/calibration/progress', msg)
+
+    def open_bag(self, path, declared_text):
+        self.writer = bag_io.BagWriter(path)
+        for topic, (_, type_name) in RECORDED.items():
+            self.writer.add_topic(topic, type_name)
+        self.writer.add_topic('/goal', 'geometry_msgs/msg/PointStamped')
+        self.writer.add_topic('/calibration/rest', 'robotenis_interfaces/msg/RestMarker')
+        self.writer.add_topic('/calibration/progress', 'robotenis_interfaces/msg/CalibrationProgress')
+        self.writer.add_topic('/robot_description', 'std_msgs/msg/String')
+        self.writer.add_topic(self.image_topic + '/compressed', 'sensor_msgs/msg/CompressedImage')
+        self.images_kept = {}
+        text = String(data=declared_text)
+        self.description_pub.publish(text)
+        self.record('/robot_description', text)
+
+    def param(self, name, requested):
+        return requested if requested else self.get_parameter(name).value
+
+    async def on_calibrate(self, request, response):
+        if self.busy:
+            response.success, response.message = False, 'busy: a calibration session is already running'
+            return response
+        self.busy = True
+        try:
+            await self.run_session(request, response)
+        except (pipeline.CalibrationError, ValueError, OSError) as e:
+            response.success, response.message = False, f'calibration failed: {e}'
+            self.get_logger().error(response.message)
+        finally:
+            self.close_bag()
+            self.runner = None
+            self.busy = False
+        return response
+
+    def close_bag(self):
+        """Finish the bag being recorded, if any."""
+        if self.writer is not None:
+            self.writer.close()
+            self.writer = None
+
+    async def run_session(self, request, response):
+        path = self.get_parameter('description_path').value
+        declared = description.load(path)
+        n = self.param('num_poses', request.num_poses)
+        config = RunnerConfig(frames_per_pose=self.param('frames_per_pose', request.frames_per_pose),
+                              settle_time=request.settle_time if request.settle_time > 0
+                              else self.get_parameter('settle_time').value)
+        rng = np.random.default_rng(request.seed)
+        planned = poses.select(request.pose_selection or 'boundary', declared,
+                               self.get_parameter('sphere_guess').value, n, rng)
+        stamp = time.strftime('%Y%m%d-%H%M%S')
+        bag = request.bag_path or os.path.join(self.get_parameter('bags_dir').value, f'session-{stamp}')
+        result_path = os.path.join(self.get_parameter('results_dir').value, f'calibration-{stamp}.yaml')
+        self.open_bag(bag, description.dumps(declared))
+        self.get_logger().info(f'session: {len(planned)} poses ({request.pose_selection or "boundary"}), '
+                               f'{config.frames_per_pose} frames each, recording {bag}')
+        self.finished = Future()
+        self.runner = SessionRunner(planned, config)
+        self.runner.start(self.now())
+        await self.finished
+        skipped = list(self.runner.skipped)
+        self.close_bag()
+        response.bag_path = bag
+        outcome = pipeline.calibrate_bag(
+            bag, result_path, self.get_parameter('holdout_fraction').value, request.seed,
+            progress=lambda text: self.publish_progress('identifying', len(planned) - 1, len(planned), 1.0, text))
+        d = outcome.diagnosis
+        response.success = True
+        response.message = (f'{len(planned) - len(skipped)} of {len(planned)} poses measured; '
+                            f'effects found: {", ".join(d.effects) or "none"}')
+        response.result_path = result_path
+        response.rms_before_mm = d.errors_mm['nominal']
+        response.rms_plain_mm = d.errors_mm['plain']
+        response.rms_after_mm = d.errors_mm['final']
+        response.effects = list(d.effects)
+        self.publish_progress(DONE, len(planned) - 1, len(planned), 1.0, response.message)
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    node = CalibrationNode()
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        executor.shutdown()
+        node.close_bag()
+        node.destroy_node()
+        rclpy.try_shutdown()

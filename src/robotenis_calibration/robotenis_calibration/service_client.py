@@ -1,0 +1,70 @@
+"""`./robotenis calibrate --call`: call the running calibration service, with a progress bar."""
+import sys
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+
+from robotenis_interfaces.msg import CalibrationProgress
+from robotenis_interfaces.srv import Calibrate
+
+SERVICE_WAIT = 10.0   # s for the service to appear
+
+
+def progress_bar(fraction, text, width=40):
+    """One line of progress: a bar, the percentage and what is happening."""
+    fraction = max(0.0, min(1.0, fraction))
+    filled = int(round(fraction * width))
+    return f"[{'#' * filled}{'.' * (width - filled)}] {100 * fraction:5.1f} % {text}"
+
+
+def request_from(args):
+    """The Calibrate request of the command line (0 or empty: the service's defaults)."""
+    return Calibrate.Request(num_poses=args.poses, frames_per_pose=args.frames, settle_time=float(args.settle or 0.0),
+                             seed=args.seed, pose_selection=args.selection, bag_path=args.bag)
+
+
+def show(msg):
+    """Draw a CalibrationProgress message as the progress bar on stderr."""
+    text = f'{msg.stage} pose {msg.pose_index + 1}/{msg.pose_count} {msg.message}'
+    print('\r' + progress_bar(msg.fraction, text)[:120].ljust(120), end='', file=sys.stderr, flush=True)
+
+
+def answer(r):
+    """Print the service's response; the exit status."""
+    if not r.success:
+        print(f'robotenis calibrate: {r.message}', file=sys.stderr)
+        return 1
+    print(r.message)
+    print(f'bag: {r.bag_path}\nresult: {r.result_path}')
+    print(f'held-out RMS error: nominal {r.rms_before_mm:.3f} mm, plain {r.rms_plain_mm:.3f} mm, '
+          f'final {r.rms_after_mm:.3f} mm; effects: {", ".join(r.effects) or "none"}')
+    return 0
+
+
+def call(args, timeout_s=3600.0):
+    """Call /calibrate and wait for its answer, showing /calibration/progress; the exit status."""
+    rclpy.init()
+    node = rclpy.create_node('calibrate_client')
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    client = node.create_client(Calibrate, '/calibrate')
+    node.create_subscription(CalibrationProgress, '/calibration/progress', show, 10)
+    try:
+        if not client.wait_for_service(timeout_sec=SERVICE_WAIT):
+            print('robotenis calibrate: no /calibrate service (start the system: ./robotenis launch)',
+                  file=sys.stderr)
+            return 2
+        future = client.call_async(request_from(args))
+        executor.spin_until_future_complete(future, timeout_sec=timeout_s)
+        print(file=sys.stderr)
+        if not future.done():
+            print(f'robotenis calibrate: no answer from the service in {timeout_s:.0f} s', file=sys.stderr)
+            return 1
+        return answer(future.result())
+    except (KeyboardInterrupt, ExternalShutdownException):
+        print('\nrobotenis calibrate: interrupted (the session goes on in the service)', file=sys.stderr)
+        return 130
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()

@@ -1,0 +1,95 @@
+"""`replay` as its own process publishes a bag's messages, with their stamps and their timing.
+
+A probe node in this process subscribes before the replay starts (the replay waits ``--delay`` for
+discovery); the reliable /sphere/position must arrive complete and in order, the latched
+/robot_description once, and the images (sensor-data QoS, best effort) at all.
+"""
+import os
+import random
+import signal
+import subprocess
+import time
+
+import pytest
+import rclpy
+from geometry_msgs.msg import PointStamped
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
+from sensor_msgs.msg import CompressedImage
+from std_msgs.msg import String
+
+from robotenis_calibration import bag_io, bag_sim
+
+TOP = os.path.abspath(os.path.join(os.path.dirname(os.path.realpath(__file__)), '..', '..', '..'))
+RATE = 4.0
+
+
+def executable():
+    path = os.path.join(TOP, 'install', 'robotenis_calibration', 'lib', 'robotenis_calibration', 'replay')
+    if not os.path.exists(path):
+        pytest.skip(f'{path} is not installed (./robotenis setup)')
+    return path
+
+
+@pytest.fixture
+def probe():
+    env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(1, 200)), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')})
+    rclpy.init()
+    node = rclpy.create_node('replay_probe')
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        yield node, executor, env
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def spin_while(executor, proc, timeout):
+    deadline = time.monotonic() + timeout
+    while proc.poll() is None and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.01)
+    for _ in range(50):       # what is still in flight after the replay exits
+        executor.spin_once(timeout_sec=0.01)
+
+
+def test_replay_publishes_the_bag(tmp_path, probe):
+    node, executor, env = probe
+    bag = bag_sim.write(tmp_path / 'bag', bag_sim.BagSpec(poses=10, images_per_pose=1))
+    with bag_io.BagReader(bag.path) as reader:
+        stamps = [s for _, _, s, _ in reader.messages(['/sphere/position'])]
+        records = list(reader.records(['/sphere/position']))
+    span = (records[-1].log_ns - records[0].log_ns) * 1e-9
+    got, descriptions, images = [], [], []
+    node.create_subscription(PointStamped, '/sphere/position',
+                             lambda m: got.append((m.header.stamp.sec * 10 ** 9 + m.header.stamp.nanosec,
+                                                   time.monotonic())), QoSProfile(depth=len(stamps)))
+    node.create_subscription(String, '/robot_description', lambda m: descriptions.append(m.data),
+                             QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    node.create_subscription(CompressedImage, '/camera/image_raw/compressed', images.append, qos_profile_sensor_data)
+    log = open(tmp_path / 'replay.log', 'w')
+    proc = subprocess.Popen([executable(), bag.path, '--rate', str(RATE), '--delay', '2'], env=env,
+                            stdout=log, stderr=subprocess.STDOUT)
+    spin_while(executor, proc, 60.0)
+    log.close()
+    assert proc.returncode == 0, (tmp_path / 'replay.log').read_text()
+    assert [s for s, _ in got] == stamps
+    assert len(descriptions) == 1 and descriptions[0].startswith('legs:')
+    assert images and images[0].format == bag_io.PNG_FORMAT
+    # the original timing: never faster than the recording divided by the rate
+    assert got[-1][1] - got[0][1] > span / RATE * 0.99
+
+
+def test_replay_stops_cleanly_on_ctrl_c(tmp_path, probe):
+    _, _, env = probe
+    bag = bag_sim.write(tmp_path / 'bag', bag_sim.BagSpec(poses=10))
+    proc = subprocess.Popen([executable(), bag.path, '--delay', '0.5'], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    time.sleep(3.0)
+    assert proc.poll() is None, proc.communicate()[0]
+    proc.send_signal(signal.SIGINT)
+    out = proc.communicate(timeout=10)[0]
+    assert proc.returncode == 0, out
+    assert 'interrupted' in out and 'Traceback' not in out
