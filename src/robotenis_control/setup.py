@@ -24,6 +24,7 @@ setup(
     entry_points={
         'console_scripts': [
             'motion_controller = robotenis_control.motion_controller_node:main',
+            'pbvs_tracker = robotenis_control.pbvs_tracker_node:main',
         ],
     },
 )

@@ -97,9 +97,9 @@ class CalibrationNode(Node):
             return
         t = self.now()
         if topic == '/joint_states':
-            Theta, velocity = joint_vector(msg, 'position'), joint_vector(msg, 'velocity')
-            if Theta is not None and velocity is not None:
-                self.runner.joint_state(t, Theta, velocity)
+            Theta = joint_vector(msg, 'position')
+            if Theta is not None:
+                self.runner.joint_state(t, Theta)
         elif topic == '/sphere/detection':
             p = msg.position
             self.runner.detection(t, np.array([p.x, p.y, p.z]), np.reshape(msg.covariance, (3, 3)))

@@ -10,6 +10,12 @@ the observability analysis of all 21 parameters.
 Part 2. The same robot, now with a backlash in its joints that no description declares, through the
 residual loop: it finds and names the effect, and prints the held-out errors before and after. The
 result (a calibrated description with its effects and report) and the residual plots go to --out.
+
+Part 3. The whole system through ROS: the nodes (simulated motors and hand camera with the backlash
+in their truth, sphere detector, motion controller, calibration service) start as separate processes
+on the simulator's clock; the demo calls the Calibrate service as `./robotenis calibrate --call`
+would, with a progress bar, and the service records the session to a bag under --out, finds the
+rests, averages the detections, identifies and runs the residual loop. ``--offline`` skips part 3.
 """
 import argparse
 import os
@@ -94,18 +100,56 @@ def residual_loop(nominal, truth, args):
     print(f'   wrote {path} and residuals.png (try: ./robotenis fk --model {path})')
 
 
+def ros_session(nominal, truth, args):
+    """Part 3: launch the nodes, call /calibrate, print the service's answer; the exit status."""
+    from types import SimpleNamespace
+
+    from robotenis_calibration import service_client
+    from robotenis_sim import launch
+    robot = sim_truth.with_effects(truth, **study.EFFECTS['backlash'])
+    out = os.path.abspath(args.out)
+    os.makedirs(out, exist_ok=True)
+    truth_path = os.path.join(out, 'truth.yaml')
+    sim_truth.save(robot, truth_path)
+    bag = os.path.join(out, time.strftime('session-%Y%m%d-%H%M%S'))
+    print(f'4. the whole loop through ROS: {args.ros_poses} poses, {args.frames} frames each, settle '
+          f'{args.settle} s; simulated time at {args.speed} of real time')
+    top = os.environ.get('ROBOTENIS_TOP', os.getcwd())
+    nodes = launch.default_nodes(truth_path, description.config_path('nominal.yaml'), sim_time=True,
+                                 extra={'calibration': {'bags_dir': out, 'results_dir': out}}, speed=args.speed)
+    launcher = launch.Launcher(nodes, os.path.join(top, 'install'), os.path.join(top, 'log', 'demo'))
+    started = time.perf_counter()
+    launcher.start()
+    try:
+        status = service_client.call(SimpleNamespace(poses=args.ros_poses, frames=args.frames, settle=args.settle,
+                                                     seed=args.seed, selection='boundary', bag=bag))
+    finally:
+        launcher.check()
+        launcher.stop()
+    print(f'   {time.perf_counter() - started:.0f} s from launch to answer; node logs in {top}/log/demo')
+    return status
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog='robotenis demo', description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--poses', type=int, default=300)
     parser.add_argument('--seed', type=int, default=1)
-    parser.add_argument('--out', default='report/demo', help='folder for result.yaml and residuals.png')
+    parser.add_argument('--out', default='report/demo', help='folder for result.yaml, residuals.png and the bag')
+    parser.add_argument('--offline', action='store_true', help='parts 1 and 2 only (no ROS)')
+    parser.add_argument('--ros-poses', type=int, default=120, help='poses of the session through ROS')
+    parser.add_argument('--frames', type=int, default=30, help='camera frames averaged per pose')
+    parser.add_argument('--settle', type=float, default=0.3, help='settle time at each pose (s)')
+    parser.add_argument('--speed', type=float, default=0.5, help='simulated seconds per wall second')
     args = parser.parse_args(argv)
     nominal, truth = description.nominal(), sim_truth.load()
     identification(nominal, truth, args)
     print()
     residual_loop(nominal, truth, args)
-    return 0
+    if args.offline:
+        return 0
+    print()
+    return ros_session(nominal, truth, args)
 
 
 if __name__ == '__main__':

@@ -5,6 +5,7 @@ For each planned pose, in order: command it, wait until the joints are still, wa
 detections until enough frames are in; a pose whose ball is not seen within a time-out is skipped
 with the reason. The calibration node feeds it messages and executes the actions it returns.
 """
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -28,8 +29,11 @@ class Rest:
 class RunnerConfig:
     frames_per_pose: int = 500
     settle_time: float = 4.0           # s, the paper's wait at each change of pose
-    still_speed: float = 2e-3          # rad/s: below this on every joint the robot is still
-    still_time: float = 0.05           # s of stillness before the settle time starts
+    # Still: over still_time every joint's readings stay within still_range. Judged on positions, as
+    # the speed a drive differentiates from a quantised resolver at 1 kHz flickers by a count per ms
+    # (3.8e-5 rad / 1 ms = 0.04 rad/s). The range covers a count and +-4 sigma of the 2e-5 rad noise.
+    still_range: float = 2.5e-4        # rad
+    still_time: float = 0.1            # s of stillness before the settle time starts
     move_timeout: float = 10.0         # s to reach a pose
     measure_timeout: float = 10.0      # s to collect the frames before the pose is skipped
 
@@ -45,7 +49,7 @@ class SessionRunner:
         self.rests, self.skipped = [], []
         self.actions = []
         self._t_state = None
-        self._still_since = None
+        self._window = deque()            # (t, Theta) of the last still_time while moving
         self._rest = None
 
     @property
@@ -62,7 +66,7 @@ class SessionRunner:
             self._enter(DONE, t)
             self.actions.append(('done', None))
             return
-        self._still_since = None
+        self._window.clear()
         self._enter(MOVING, t)
         self.actions.append(('goal', self.poses[self.index]))
         self.actions.append(('progress', (MOVING, self.index, len(self.poses))))
@@ -70,17 +74,21 @@ class SessionRunner:
     def start(self, t):
         self._next_pose(t)
 
-    def joint_state(self, t, Theta, velocity):
-        """One /joint_states sample: increments (rad) and speeds (rad/s) of the three joints."""
+    def joint_state(self, t, Theta):
+        """One /joint_states sample: the increments (rad) of the three joints."""
+        Theta = np.asarray(Theta, dtype=float)
         if self.state == MOVING:
-            still = np.all(np.abs(velocity) < self.config.still_speed)
-            self._still_since = (self._still_since or t) if still else None
+            self._window.append((t, Theta))
+            while self._window and self._window[0][0] < t - self.config.still_time:
+                self._window.popleft()
             # Ignore stillness right after the goal: the robot has not started moving yet.
-            if still and t - self._still_since >= self.config.still_time and t - self._t_state > 0.1:
-                self._enter(SETTLING, t)
-                self.actions.append(('progress', (SETTLING, self.index, len(self.poses))))
+            if t - self._t_state > 0.1 and self._window[0][0] <= t - 0.9 * self.config.still_time:
+                values = np.array([v for _, v in self._window])
+                if np.all(np.ptp(values, axis=0) <= self.config.still_range):
+                    self._enter(SETTLING, t)
+                    self.actions.append(('progress', (SETTLING, self.index, len(self.poses))))
         elif self.state == MEASURING:
-            self._rest.Theta.append(np.asarray(Theta, dtype=float))
+            self._rest.Theta.append(Theta)
 
     def detection(self, t, position, covariance):
         """One sphere detection (optical frame, m) with its covariance (3x3, m^2)."""

@@ -3,17 +3,21 @@ import numpy as np
 from robotenis_calibration.session_runner import DONE, MEASURING, RunnerConfig, SessionRunner
 
 
-def drive(runner, visible, dt=0.001, t_end=30.0):
-    """A fake robot: reaches each goal after 0.3 s; the camera sees the ball at 120 Hz when visible."""
+def drive(runner, visible, dt=0.001, t_end=30.0, seed=0):
+    """A fake robot: moves to each goal in 0.3 s, its readings quantised with the simulator's count
+    and noise; the camera sees the ball at 120 Hz when visible."""
+    rng = np.random.default_rng(seed)
+    q = 2 * np.pi / 163840
     t, goal_time, actions = 0.0, 0.0, []
+    Theta = start = target = np.zeros(3)
     runner.start(t)
     while runner.state != DONE and t < t_end:
         for a in runner.take_actions():
             actions.append((t, a))
             if a[0] == 'goal':
-                goal_time = t
-        moving = t - goal_time < 0.3
-        runner.joint_state(t, np.full(3, runner.index * 0.1), np.full(3, 0.5 if moving else 0.0))
+                goal_time, start, target = t, Theta, np.full(3, (runner.index + 1) * 0.1)
+        Theta = start + (target - start) * min(1.0, (t - goal_time) / 0.3)
+        runner.joint_state(t, np.round((Theta + rng.normal(scale=2e-5, size=3)) / q) * q)
         if visible(runner.index) and round(t * 1000) % 8 == 0:
             runner.detection(t, np.array([0.0, 0.0, 0.3]) + 1e-5 * runner.index, np.eye(3) * 1e-10)
         runner.tick(t)

@@ -154,13 +154,27 @@ def load(path=None):
         raise DescriptionError(f"{path}: {e}") from None
 
 
-def with_effects(truth, **effects):
-    """A copy of ``truth`` with effects added (as a truth file would give them)."""
+def to_dict(truth, **effects):
+    """Plain data of a truth file for ``truth``, with ``effects`` added."""
     data = {'geometry': truth.geometry.to_dict(), 'camera_translation': truth.camera_translation.tolist(),
             'sphere_position': truth.sphere_position.tolist(),
             # base_geometry is already in the geometry: carrying it again would apply it twice
             'effects': {**{k: v for k, v in truth.effects.items() if k != 'base_geometry'}, **effects}}
-    return from_dict(yaml.safe_load(yaml.safe_dump(_plain(data))))
+    return _plain(data)
+
+
+def with_effects(truth, **effects):
+    """A copy of ``truth`` with effects added (as a truth file would give them)."""
+    return from_dict(yaml.safe_load(yaml.safe_dump(to_dict(truth, **effects))))
+
+
+def save(truth, path):
+    """Write a truth file (temporary file, then rename)."""
+    tmp = f'{path}.tmp'
+    with open(tmp, 'w') as f:
+        f.write('# The simulator\'s truth: read by the simulator only.\n')
+        yaml.safe_dump(to_dict(truth), f, sort_keys=False)
+    os.replace(tmp, path)
 
 
 def _plain(obj):

@@ -101,3 +101,13 @@ def test_joint_readings_remember_the_last_motion(truth):
     resting = hook(alpha, np.zeros(3))
     np.testing.assert_allclose(moving_down, resting)
     np.testing.assert_allclose(resting - (alpha - truth.geometry.theta0), [1e-4, -1e-4, 1e-4])
+
+
+def test_saved_truth_reads_back(truth, tmp_path):
+    t = sim_truth.with_effects(truth, backlash=[1e-3, 6e-4, 8e-4],
+                               base_geometry={'dH': [0.002, 0, 0], 'dphi': [0, 0.008, -0.006]})
+    sim_truth.save(t, tmp_path / 'truth.yaml')
+    back = sim_truth.load(tmp_path / 'truth.yaml')
+    np.testing.assert_allclose(back.geometry.phi, t.geometry.phi)
+    np.testing.assert_allclose(back.effects['backlash'], t.effects['backlash'])
+    np.testing.assert_allclose(back.sphere_position, t.sphere_position)

@@ -1,0 +1,47 @@
+"""Benchmark: the tracking tests of section 6.2.2 (Table 5) in simulation, and a baseline.
+
+Runs robotenis_calibration.tracking_study (10 tests of 5,000 camera samples per maximum ball speed,
+nominal against calibrated description; ``--quick``: 2 tests of 1,000) and prints Table 5's layout
+with our numbers beside the paper's. Baseline, same process: the same law without the Kalman velocity
+feedforward v_p (pure proportional u_r = -K_p e_r), on 2 tests of 1,000 samples (``--full-baseline``:
+as many as the study). Also prints how fast the simulation ran (robot-seconds per wall second).
+"""
+import argparse
+import sys
+
+from robotenis_calibration import tracking_study as ts
+
+
+def robot_seconds(table):
+    """Simulated robot time behind a table (s): every run, segment and warm-up included."""
+    count, length = ts.segments(table.samples, table.setup)
+    frames = table.setup.warmup_frames + length + table.setup.latency_frames + 1
+    return len(table.labels) * len(table.speeds) * table.tests * count * frames * table.setup.frame_period
+
+
+def speed_line(name, table):
+    seconds = robot_seconds(table)
+    return (f'{name}: {table.wall_time:.1f} s wall for {seconds:.0f} robot-seconds at 1 kHz '
+            f'({seconds / table.wall_time:.1f} robot-seconds per second)')
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--quick', action='store_true', help='2 tests of 1,000 samples per speed')
+    parser.add_argument('--full-baseline', action='store_true', help='the baseline as large as the study')
+    args = parser.parse_args(argv)
+    study = ts.run(quick=args.quick)
+    size = {} if args.full_baseline else {'tests': ts.QUICK_TESTS, 'samples': ts.QUICK_SAMPLES}
+    baseline = ts.run(quick=args.quick, setup=ts.Setup(feedforward=False), **size)
+    print('\n'.join(ts.table_lines(study)))
+    print()
+    print('baseline, same process: pure proportional u_r = -K_p e_r (no v_p)')
+    print('\n'.join(ts.table_lines(baseline)))
+    print()
+    for name, table in (('study', study), ('baseline', baseline)):
+        print(speed_line(name, table))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
