@@ -26,6 +26,7 @@ from mcap.stream_reader import StreamReader
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 INTERFACES = 'robotenis_interfaces'
@@ -205,12 +206,19 @@ class BagReader:
         """(topic, type name, stamp_ns, message) of ``topics``: deserialized, with the header stamp
         when the message has a non-zero one, the recording time otherwise."""
         store = typestore()
+        broken = Counter()
         for r in self.records(topics, progress, steps):
             try:
-                msg = store.deserialize_cdr(r.data, r.type_name)
+                decode = FAST_DECODERS.get(r.type_name)
+                msg = decode(r.data) if decode else store.deserialize_cdr(r.data, r.type_name)
             except KeyError as e:
                 raise ValueError(f'{r.topic}: message type {r.type_name!r} is not known to the typestore') from e
+            except (SerdeError, struct.error, ValueError):
+                broken[r.topic] += 1       # a corrupt record: skip it, say so once per topic below
+                continue
             yield r.topic, r.type_name, stamp_ns(msg, r.log_ns), msg
+        for topic, n in broken.items():
+            self.notes.append(f'{topic}: {n} message(s) could not be decoded and were skipped')
 
 
 def stamp_ns(msg, log_ns):
@@ -219,3 +227,78 @@ def stamp_ns(msg, log_ns):
     if header is None or (header.stamp.sec == 0 and header.stamp.nanosec == 0):
         return log_ns
     return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
+
+
+class _Stamp(NamedTuple):
+    sec: int
+    nanosec: int
+
+
+class _Header(NamedTuple):
+    stamp: _Stamp
+    frame_id: str
+
+
+class JointStateMsg(NamedTuple):
+    """sensor_msgs/JointState as decoded by ``decode_joint_state`` (sequences as tuples)."""
+
+    header: _Header
+    name: tuple
+    position: tuple
+    velocity: tuple
+    effort: tuple
+
+
+def decode_joint_state(data):
+    """sensor_msgs/JointState from its CDR bytes (XCDR1, either byte order).
+
+    Written out because the typestore's decoder is strict where serializers differ: rclpy's Fast CDR
+    does not pad before an empty float64 sequence, so a JointState with an empty ``effort`` (most
+    drivers', and ours) fails its size check. Alignment is relative to the end of the 4-byte
+    encapsulation, and a float64 sequence aligns to 8 only when it has elements.
+    """
+    data = bytes(data)
+    if len(data) < 4 or data[1] not in (0, 1):
+        raise ValueError('not a CDR encapsulated message')
+    order = '<' if data[1] == 1 else '>'
+    pos = 4
+
+    def align(n):
+        nonlocal pos
+        pos += (-(pos - 4)) % n
+
+    def uint32():
+        nonlocal pos
+        align(4)
+        (value,) = struct.unpack_from(order + 'I', data, pos)
+        pos += 4
+        return value
+
+    def string():
+        nonlocal pos
+        n = uint32()
+        text = data[pos:pos + n].rstrip(b'\0').decode()
+        pos += n
+        return text
+
+    def doubles():
+        nonlocal pos
+        n = uint32()
+        if n == 0:
+            return ()
+        align(8)
+        values = struct.unpack_from(f'{order}{n}d', data, pos)
+        pos += 8 * n
+        return values
+
+    sec, nanosec = struct.unpack_from(order + 'iI', data, pos)
+    pos += 8
+    header = _Header(_Stamp(sec, nanosec), string())
+    names = tuple(string() for _ in range(uint32()))
+    msg = JointStateMsg(header, names, doubles(), doubles(), doubles())
+    if pos > len(data):
+        raise ValueError('JointState: message cut short')
+    return msg
+
+
+FAST_DECODERS = {'sensor_msgs/msg/JointState': decode_joint_state}

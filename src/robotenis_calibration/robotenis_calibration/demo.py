@@ -113,10 +113,10 @@ def ros_session(nominal, truth, args):
     sim_truth.save(robot, truth_path)
     bag = os.path.join(out, time.strftime('session-%Y%m%d-%H%M%S'))
     print(f'4. the whole loop through ROS: {args.ros_poses} poses, {args.frames} frames each, settle '
-          f'{args.settle} s; simulated time at {args.speed} of real time')
+          f'{args.settle} s; simulated time, the simulator and the controller in lockstep at 1 kHz')
     top = os.environ.get('ROBOTENIS_TOP', os.getcwd())
     nodes = launch.default_nodes(truth_path, description.config_path('nominal.yaml'), sim_time=True,
-                                 extra={'calibration': {'bags_dir': out, 'results_dir': out}}, speed=args.speed)
+                                 extra={'calibration': {'bags_dir': out, 'results_dir': out}})
     launcher = launch.Launcher(nodes, os.path.join(top, 'install'), os.path.join(top, 'log', 'demo'))
     started = time.perf_counter()
     launcher.start()
@@ -140,7 +140,6 @@ def main(argv=None):
     parser.add_argument('--ros-poses', type=int, default=120, help='poses of the session through ROS')
     parser.add_argument('--frames', type=int, default=30, help='camera frames averaged per pose')
     parser.add_argument('--settle', type=float, default=0.3, help='settle time at each pose (s)')
-    parser.add_argument('--speed', type=float, default=0.5, help='simulated seconds per wall second')
     args = parser.parse_args(argv)
     nominal, truth = description.nominal(), sim_truth.load()
     identification(nominal, truth, args)

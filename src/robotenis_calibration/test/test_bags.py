@@ -233,3 +233,20 @@ def test_an_undeclared_effect_in_the_truth_is_named_in_the_result(tmp_path):
     expected = 1 / (1 + np.array(EFFECTS['joint_scale']['joint_scale'])) - 1
     assert np.sum(((k - expected) / std) ** 2) < chi2_bound(3)
     assert outcome.diagnosis.errors_mm['final'] < outcome.diagnosis.errors_mm['plain']
+
+
+def test_joint_states_serialized_by_rclpy_are_read(tmp_path):
+    """rclpy writes no padding before an empty effort sequence; the reader must take it as it is."""
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+    msg = JointState(name=['motor_2', 'motor_1', 'motor_3'], position=[0.2, 0.1, 0.3], velocity=[1.0, 2.0, 3.0])
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 12, 345
+    path = tmp_path / 'bag'
+    with bag_io.BagWriter(path) as writer:
+        writer.add_topic('/joint_states', 'sensor_msgs/msg/JointState')
+        writer.write('/joint_states', 1, serialize_message(msg))
+    with bag_io.BagReader(path) as reader:
+        (topic, _, stamp, back), = list(reader.messages())
+    assert stamp == 12_000_000_345 and back.name == ('motor_2', 'motor_1', 'motor_3')
+    assert back.position == (0.2, 0.1, 0.3) and back.velocity == (1.0, 2.0, 3.0) and back.effort == ()
+    assert reader.notes == []

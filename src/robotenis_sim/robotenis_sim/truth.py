@@ -195,9 +195,11 @@ class JointReadings:
 
     Tracks each joint's motion direction (the sign of its last speed above ``min_speed`` rad/s, for
     backlash) and applies the truth's joint effects; without effects the increments are alpha - theta0.
+    On a reversal the reading steps by the backlash width at once (the gap is not simulated as a
+    state); 0.02 rad/s (1 cm/s at the elbow) keeps the controller's dither at rest from flipping it.
     """
 
-    def __init__(self, truth, min_speed=1e-3):
+    def __init__(self, truth, min_speed=0.02):
         self.truth, self.min_speed = truth, min_speed
         self.direction = np.ones(3)
 
