@@ -23,6 +23,8 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
+            'sphere_detector = robotenis_vision.sphere_detector_node:main',
+            'detect = robotenis_vision.detect_cli:main',
         ],
     },
 )

@@ -32,23 +32,14 @@ from robotenis_calibration.session_runner import DONE, MEASURING, RunnerConfig, 
 from robotenis_interfaces.msg import CalibrationProgress, RestMarker, SphereDetection
 from robotenis_interfaces.srv import Calibrate
 from robotenis_kinematics import description
+from robotenis_kinematics.ros import joint_vector
 
-JOINTS = ('motor_1', 'motor_2', 'motor_3')
 RECORDED = {  # topic -> (message class, ROS type name)
     '/joint_states': (JointState, 'sensor_msgs/msg/JointState'),
     '/sphere/position': (PointStamped, 'geometry_msgs/msg/PointStamped'),
     '/sphere/detection': (SphereDetection, 'robotenis_interfaces/msg/SphereDetection'),
     '/camera/camera_info': (CameraInfo, 'sensor_msgs/msg/CameraInfo'),
 }
-
-
-def joint_vector(msg, field):
-    """The motor_1..3 values of a JointState field, whatever the order of the names."""
-    values = getattr(msg, field)
-    index = {name: i for i, name in enumerate(msg.name)}
-    if len(values) != len(msg.name) or any(j not in index for j in JOINTS):
-        return None
-    return np.array([values[index[j]] for j in JOINTS], dtype=float)
 
 
 class CalibrationNode(Node):

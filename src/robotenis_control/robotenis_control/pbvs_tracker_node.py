@@ -22,18 +22,16 @@ import sys
 from collections import deque
 
 import numpy as np
-import rclpy
 from geometry_msgs.msg import PointStamped, TwistStamped
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.time import Time
 from sensor_msgs.msg import JointState
 
 from robotenis_control import pbvs
-from robotenis_control.motion_controller_node import joint_vector
 from robotenis_kinematics import delta, description
 from robotenis_kinematics.description import DescriptionError
+from robotenis_kinematics.ros import joint_vector, spin
 from robotenis_kinematics.synthetic import NoiseModel
 
 READING_MATCH_S = 0.02   # a detection needs a joint reading this close to its exposure
@@ -153,24 +151,7 @@ class PbvsTrackerNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    executor = SingleThreadedExecutor()
-    try:
-        node = PbvsTrackerNode()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except DescriptionError as e:
-        print(f'pbvs_tracker: {e}', file=sys.stderr)
-        return 2
-    finally:
-        executor.shutdown()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return spin(PbvsTrackerNode, 'pbvs_tracker', (DescriptionError,), args)
 
 
 if __name__ == '__main__':

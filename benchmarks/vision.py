@@ -1,0 +1,228 @@
+"""Benchmark: measuring the sphere in hand-camera images (issue 4).
+
+Images come from the simulator's renderer (robotenis_sim.camera_model) with known truth: the 19 mm
+ball, shaded with a light and a glossy highlight, on a gradient + textured background, blurred,
+with sensor noise, through the default hand camera (640x480, f = 500 px, plumb_bob distortion).
+
+1. Accuracy at 200 mm in the image centre, single frames (the paper's Table 2 setting): bias and
+   precision separately, per axis, for the four methods. Targets: lateral < 0.02 mm, depth < 0.1 mm
+   (RMS error, bias included), beside the paper's Table 2. Then averages of N frames
+   (robotenis_vision.averaging) repeated, beside the paper's Table 3 (25 averages of 500 frames).
+2. 3D error over 150-600 mm, across image positions and lighting: RMS per range and overall for each
+   method; target: the conic method's at least 5x smaller than the plain baseline's.
+3. Speed per 640x480 frame on one core; target < 2 ms for the conic method. Baseline in the same
+   process: the plain baseline method.
+4. Render time per 640x480 frame; target < 4 ms. Baseline in the same process: what any frame-wide
+   renderer pays at least (full-frame Gaussian noise and blur).
+"""
+import os
+
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+os.environ.setdefault('OMP_NUM_THREADS', '1')
+
+import time  # noqa: E402
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+from robotenis_sim import camera_model as cm  # noqa: E402
+from robotenis_vision import camera, detector  # noqa: E402
+
+cv2.setNumThreads(1)
+R = 0.0095
+CAM = camera.default()
+METHODS = ('conic', 'paper', 'tangent', 'baseline')   # tangent: the paper's eqs. 9-16 without 17-22
+TABLE2 = {'X': (0.014, 0.059), 'Y': (0.038, 0.163), 'Z': (0.092, 0.497)}   # std, range (mm), 50 samples
+TABLE3 = {'X': (0.0025, 0.0096), 'Y': (0.0049, 0.0150), 'Z': (0.0212, 0.0846)}  # 25 averages of 500 frames
+TARGET_LATERAL_MM, TARGET_DEPTH_MM, TARGET_RATIO, TARGET_DETECT_MS, TARGET_RENDER_MS = 0.02, 0.1, 5.0, 2.0, 4.0
+LIGHTS = {
+    'default': cm.Lighting(),
+    'side': cm.Lighting(direction=(-1.0, -0.6, 0.0)),
+    'front': cm.Lighting(direction=(-0.25, -0.35, -1.0)),
+    'dim': cm.Lighting(ambient=60.0, diffuse=90.0, specular=40.0),
+}
+RANGES = (0.15, 0.2, 0.3, 0.45, 0.6)
+
+
+def verdict(ok):
+    return 'met' if ok else 'NOT met'
+
+
+def measure(images, truths, method):
+    """Errors (n, 3) in mm of the detections that succeeded, and the number that failed."""
+    errors, failed = [], 0
+    for image, c in zip(images, truths):
+        try:
+            errors.append((detector.detect(image, CAM, R, method).position - c) * 1e3)
+        except detector.DetectionError:
+            failed += 1
+    return np.array(errors).reshape(-1, 3), failed
+
+
+def at_200mm(frames=100):
+    print(f'1. single frames at 200 mm in the image centre ({frames} frames, default scene), mm')
+    rng = np.random.default_rng(200)
+    c = np.array([0.0, 0.0, 0.2])
+    images = [cm.render(CAM, c, R, rng) for _ in range(frames)]
+    print('   method     axis   bias     std      range    RMS   | paper Table 2: std   range')
+    result = {}
+    for method in METHODS:
+        e, failed = measure(images, [c] * frames, method)
+        for k, axis in enumerate('XYZ'):
+            std, rng_ = TABLE2[axis]
+            print(f'   {method:9s}  {axis}   {e[:, k].mean():+8.4f} {e[:, k].std():8.4f} {np.ptp(e[:, k]):8.4f} '
+                  f'{np.sqrt(np.mean(e[:, k] ** 2)):7.4f} |              {std:.3f}  {rng_:.3f}')
+        if failed:
+            print(f'   {method:9s}  {failed} of {frames} frames not measured')
+        result[method] = e
+    e = result['conic']
+    lateral = max(np.sqrt(np.mean(e[:, 0] ** 2)), np.sqrt(np.mean(e[:, 1] ** 2)))
+    depth = np.sqrt(np.mean(e[:, 2] ** 2))
+    print(f'   conic: lateral RMS {lateral:.4f} mm (target < {TARGET_LATERAL_MM}: {verdict(lateral < TARGET_LATERAL_MM)}), '
+          f'depth RMS {depth:.4f} mm (target < {TARGET_DEPTH_MM}: {verdict(depth < TARGET_DEPTH_MM)})')
+
+
+def averaged(repeats=12, frames=100):
+    print(f'1b. {repeats} averages of {frames} frames each at 200 mm, image centre (conic, outlier rejection), mm')
+    from robotenis_vision import averaging
+    rng = np.random.default_rng(500)
+    c = np.array([0.0, 0.0, 0.2])
+    means, predicted, rejected = [], [], 0
+    for _ in range(repeats):
+        dets = [detector.detect(cm.render(CAM, c, R, rng), CAM, R) for _ in range(frames)]
+        avg = averaging.average([d.position for d in dets], [d.covariance for d in dets])
+        means.append((avg.position - c) * 1e3)
+        predicted.append(np.sqrt(np.diag(avg.covariance)) * 1e3)
+        rejected += int(avg.rejected.sum())
+    means, predicted = np.array(means), np.mean(predicted, axis=0)
+    print('   axis   bias      std     range   predicted std | paper Table 3: std   range')
+    for k, axis in enumerate('XYZ'):
+        std, rng_ = TABLE3[axis]
+        print(f'   {axis}   {means[:, k].mean():+8.4f} {means[:, k].std():8.4f} {np.ptp(means[:, k]):8.4f} '
+              f'{predicted[k]:8.4f}      |               {std:.4f}  {rng_:.4f}')
+    print(f'   frames rejected as outliers: {rejected} of {repeats * frames}')
+
+
+def scene(rng, z, position, light):
+    """Ball at range z, at a fraction ``position`` (u, v in -1..1) of the usable half field of view."""
+    half = np.array([(CAM.width / 2 - 40), (CAM.height / 2 - 40)]) / CAM.fx - R / z * 1.2
+    c = np.array([position[0] * half[0] * z, position[1] * half[1] * z, z])
+    return c, cm.render(CAM, c, R, rng, lighting=LIGHTS[light])
+
+
+def over_range(frames=2):
+    print(f'2. 3D error over range, image positions (centre and 4 off-axis) and lighting ({frames} frames each), mm')
+    rng = np.random.default_rng(600)
+    positions = [(0, 0), (0.7, 0.6), (-0.7, 0.6), (0.7, -0.6), (-0.7, -0.6)]
+    errors = {m: {} for m in METHODS}
+    failures = {m: 0 for m in METHODS}
+    for z in RANGES:
+        for light in LIGHTS:
+            for p in positions:
+                for _ in range(frames):
+                    c, image = scene(rng, z, p, light)
+                    for m in METHODS:
+                        e, failed = measure([image], [c], m)
+                        failures[m] += failed
+                        if len(e):
+                            errors[m].setdefault((z, light), []).append(np.linalg.norm(e[0]))
+    print('   range m   ' + ''.join(f'{m:>10s}' for m in METHODS) + '   (RMS 3D error over positions and lighting)')
+    for z in RANGES:
+        row = [np.sqrt(np.mean(np.concatenate([errors[m].get((z, L), []) for L in LIGHTS]) ** 2)) for m in METHODS]
+        print(f'   {z:6.2f}    ' + ''.join(f'{v:10.3f}' for v in row))
+    print('   lighting  ' + ''.join(f'{m:>10s}' for m in METHODS))
+    for L in LIGHTS:
+        row = [np.sqrt(np.mean(np.concatenate([errors[m].get((z, L), []) for z in RANGES]) ** 2)) for m in METHODS]
+        print(f'   {L:9s} ' + ''.join(f'{v:10.3f}' for v in row))
+    total = {m: np.sqrt(np.mean(np.concatenate([v for v in errors[m].values()]) ** 2)) for m in METHODS}
+    n = len(RANGES) * len(LIGHTS) * len(positions) * frames
+    print('   all       ' + ''.join(f'{total[m]:10.3f}' for m in METHODS))
+    print('   failed    ' + ''.join(f'{failures[m]:7d}/{n}' for m in METHODS) + '   (RMS over the frames each measured)')
+    ratio = total['baseline'] / total['conic']
+    worst = min(np.sqrt(np.mean(np.concatenate([errors['baseline'].get((z, L), []) for L in LIGHTS]) ** 2))
+                / np.sqrt(np.mean(np.concatenate([errors['conic'].get((z, L), []) for L in LIGHTS]) ** 2))
+                for z in RANGES)
+    print(f'   baseline / conic 3D RMS error: {ratio:.1f}x overall, {worst:.1f}x at the worst range '
+          f'(target >= {TARGET_RATIO:.0f}x over the whole range: {verdict(worst >= TARGET_RATIO)})')
+
+
+def timed(fn, items, repeats=3):
+    """Median and 5th-percentile wall seconds per call over items (each timed ``repeats`` times), and
+    the mean CPU seconds of this process per call (less sensitive to other processes on the machine)."""
+    times = []
+    cpu = time.process_time()
+    for item in items:
+        for _ in range(repeats):
+            t = time.perf_counter()
+            fn(item)
+            times.append(time.perf_counter() - t)
+    cpu = (time.process_time() - cpu) / len(times)
+    return float(np.median(times)), float(np.percentile(times, 5)), cpu
+
+
+def speed():
+    print('3. detection time per 640x480 frame, one core, ms (60 frames at 150-600 mm): wall median, wall 5th')
+    print('   percentile and CPU mean (this machine is shared: the last two are the figures least disturbed by')
+    print('   the others). Cold: from the image alone; warm: with the previous frame\'s detection as prior.')
+    rng = np.random.default_rng(7)
+    images = [scene(rng, z, p, 'default')[1] for z in RANGES for p in [(0, 0), (0.5, 0.4), (-0.5, -0.4)]
+              for _ in range(4)]
+    def attempt(image, method, prior=None):
+        try:
+            detector.detect(image, CAM, R, method, prior)
+        except detector.DetectionError:
+            pass                                         # a refusal costs time too: it is counted
+
+    figures = {}
+    for m in METHODS:
+        for image in images[:3]:
+            attempt(image, m)                            # warm caches
+        figures[m] = timed(lambda img: attempt(img, m), images)
+    priors = {}
+    for image in images:
+        try:
+            priors[id(image)] = detector.detect(image, CAM, R)
+        except detector.DetectionError:
+            pass
+    warm_images = [img for img in images if id(img) in priors]
+    figures['conic warm'] = timed(lambda img: attempt(img, 'conic', priors[id(img)]), warm_images)
+    for name, (med, low, cpu) in figures.items():
+        print(f'   {name:11s} {med * 1e3:7.2f} {low * 1e3:7.2f} {cpu * 1e3:7.2f}')
+    for name in ('conic', 'conic warm'):
+        med, low, cpu = figures[name]
+        print(f'   {name}: {cpu * 1e3:.2f} ms CPU per frame (target < {TARGET_DETECT_MS:.0f} ms: '
+              f'{verdict(cpu * 1e3 < TARGET_DETECT_MS)}; wall 5th percentile {low * 1e3:.2f}: '
+              f'{verdict(low * 1e3 < TARGET_DETECT_MS)}); {cpu / figures["baseline"][2]:.1f}x the plain '
+              f'baseline\'s CPU time')
+
+
+def render_speed():
+    print('4. render time per 640x480 frame (robotenis_sim.camera_model.render), ms')
+    rng = np.random.default_rng(8)
+    cm.render(CAM, [0.0, 0.0, 0.2], R, rng)
+    cases = [np.array([0.0, 0.0, z]) for z in (0.15, 0.2, 0.3, 0.6)] * 25
+    med, low, cpu = timed(lambda c: cm.render(CAM, c, R, rng), cases, repeats=1)
+
+    def floor(_):
+        frame = np.full((CAM.height, CAM.width), 100.0, np.float32)
+        frame += 2.0 * rng.standard_normal(frame.shape, dtype=np.float32)
+        return np.clip(cv2.GaussianBlur(frame, (0, 0), 0.8), 0, 255).astype(np.uint8)
+
+    base = timed(floor, cases[:40], repeats=1)
+    print(f'   render: wall median {med * 1e3:.2f}, 5th percentile {low * 1e3:.2f}, CPU {cpu * 1e3:.2f}; '
+          f'baseline, full-frame noise + blur only: CPU {base[2] * 1e3:.2f}')
+    ok = cpu * 1e3 < TARGET_RENDER_MS
+    print(f'   render time: {cpu * 1e3:.2f} ms CPU per frame (target < {TARGET_RENDER_MS:.0f} ms: {verdict(ok)}; '
+          f'wall median {verdict(med * 1e3 < TARGET_RENDER_MS)})')
+
+
+def main():
+    at_200mm()
+    averaged()
+    over_range()
+    speed()
+    render_speed()
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,116 @@
+"""The hand camera renderer: geometry against OpenCV's projection, noise, and the mounting."""
+import cv2
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from robotenis_sim import camera_model as cm, truth as sim_truth
+from robotenis_vision import camera
+
+R = 0.0095
+CAM = camera.default()
+WHITE = cm.Lighting(ambient=255.0, diffuse=0.0, specular=0.0)
+BLACK = cm.Background(low=0.0, high=0.0, texture=0.0)
+
+
+def opencv_outline(C, n=4000):
+    """The sphere's outline projected by OpenCV (its own plumb_bob): a polygon (n, 2), pixels."""
+    uv, _ = cv2.projectPoints(cm.tangent_circle(C, R, n).reshape(-1, 1, 3), np.zeros(3), np.zeros(3), CAM.K, CAM.D)
+    return uv.reshape(-1, 2)
+
+
+@pytest.mark.parametrize('C', [[0.0, 0.0, 0.2], [0.0, 0.0, 0.6], [0.15, 0.1, 0.3], [-0.2, 0.1, 0.35], [0.02, -0.05, 0.15]])
+def test_covered_area_and_centroid_match_the_projected_outline(C):
+    """Supersampled coverage: the ball's area and centroid in the image to 1/200 px of radius and
+    position (8x8 rays per pixel: 1/64 of a pixel's area per edge pixel, averaging out along the edge;
+    8-bit rounding of the coverage adds 1/510 per edge pixel at most)."""
+    image = cm.render(CAM, C, R, np.random.default_rng(0), lighting=WHITE, background=BLACK,
+                      blur_sigma=0.0, noise_sigma=0.0).astype(float) / 255
+    x, y = opencv_outline(C).T
+    area = 0.5 * abs(np.dot(x, np.roll(y, 1)) - np.dot(y, np.roll(x, 1)))
+    cx = np.sum((x + np.roll(x, 1)) * (x * np.roll(y, 1) - np.roll(x, 1) * y)) / (6 * -area)
+    cy = np.sum((y + np.roll(y, 1)) * (x * np.roll(y, 1) - np.roll(x, 1) * y)) / (6 * -area)
+    r_eq = np.sqrt(area / np.pi)
+    assert abs(image.sum() - area) / (2 * np.pi * r_eq) < 0.005
+    v, u = np.mgrid[0:CAM.height, 0:CAM.width]
+    centroid = np.array([(image * u).sum(), (image * v).sum()]) / image.sum()
+    assert np.linalg.norm(centroid - [abs(cx), abs(cy)]) < 0.005
+
+
+def test_sphere_outline_is_the_projected_tangent_circle():
+    C = np.array([0.05, -0.03, 0.25])
+    np.testing.assert_allclose(cm.sphere_outline(CAM, C, R, 50), opencv_outline(C, 50), atol=1e-9)
+
+
+def test_noise_has_the_requested_variance():
+    """Flat background, no ball in view: the variance is noise^2 plus the 1/12 of 8-bit rounding."""
+    rng = np.random.default_rng(3)
+    flat = cm.Background(low=100.0, high=100.0, texture=0.0)
+    image = cm.render(CAM, [0.0, 0.0, -1.0], R, rng, background=flat, noise_sigma=2.0).astype(float)
+    block = image[100:200, 100:300]
+    n = block.size
+    s2 = block.var(ddof=1)
+    expected = 4.0 + 1 / 12
+    assert chi2.ppf(0.0005, n - 1) / (n - 1) < s2 / expected < chi2.ppf(0.9995, n - 1) / (n - 1)
+
+
+def test_shading_background_and_repeatability():
+    a = cm.render(CAM, [0.0, 0.0, 0.2], R, np.random.default_rng(9))
+    b = cm.render(CAM, [0.0, 0.0, 0.2], R, np.random.default_rng(9))
+    np.testing.assert_array_equal(a, b)
+    assert a.dtype == np.uint8 and a.shape == (480, 640)
+    ball = a[225:255, 305:335]
+    assert ball.max() - ball.min() > 100                 # shaded: a lit side and a dark side
+    assert abs(int(a[20, 600]) - int(a[460, 20])) > 30   # the background has a gradient
+    empty = cm.render(CAM, [0.0, 0.0, -0.2], R, np.random.default_rng(9))
+    assert np.abs(empty[225:255, 305:335].astype(int) - int(np.median(empty[225:255, 305:335]))).max() < 40
+
+
+def test_sphere_in_optical_frame_from_the_mounting():
+    truth = sim_truth.load()
+    P = np.array([0.01, 0.02, 0.8])
+    ball = truth.sphere_position
+    C = cm.sphere_in_optical(P, ball, truth.camera_rotation, truth.camera_translation)
+    np.testing.assert_allclose(truth.camera_rotation @ C + P + truth.camera_translation, ball, atol=1e-15)
+    # the nominal mounting looks along base +x: depth is the base x distance
+    assert abs(C[2] - (ball[0] - P[0] - truth.camera_translation[0])) < 1e-15
+
+
+def test_bad_input_is_named():
+    with pytest.raises(ValueError, match='sphere_centre_optical'):
+        cm.render(CAM, [0.0, 0.2], R, np.random.default_rng(0))
+    with pytest.raises(ValueError, match='radius'):
+        cm.render(CAM, [0.0, 0.0, 0.2], -R, np.random.default_rng(0))
+    with pytest.raises(ValueError, match='noise_sigma'):
+        cm.render(CAM, [0.0, 0.0, 0.2], R, np.random.default_rng(0), noise_sigma=-1.0)
+
+
+def test_hand_camera_messages():
+    """The node's messages: mono8 image bytes row by row, camera_info fields from the camera."""
+    from std_msgs.msg import Header
+    from robotenis_sim.hand_camera_node import camera_info_message, image_message
+    image = np.arange(12, dtype=np.uint8).reshape(3, 4)
+    msg = image_message(image, Header(frame_id='camera_optical'))
+    assert (msg.height, msg.width, msg.step, msg.encoding) == (3, 4, 4, 'mono8')
+    assert bytes(msg.data) == image.tobytes()
+    info = camera_info_message(CAM, Header(frame_id='camera_optical'))
+    assert (info.width, info.height, info.distortion_model) == (640, 480, 'plumb_bob')
+    np.testing.assert_array_equal(np.reshape(info.k, (3, 3)), CAM.K)
+    np.testing.assert_array_equal(info.d, CAM.D)
+    assert camera.from_camera_info(info).width == 640
+
+
+def test_circles_cover_their_projected_area():
+    """A 40 mm disc at 200 mm, tilted: the ink covers the area of its projected rim (OpenCV)."""
+    n = np.array([0.0, np.sin(0.3), -np.cos(0.3)])
+    c = np.array([0.01, -0.02, 0.2])
+    image = cm.render_circles(CAM, [c], [n], [0.02], np.random.default_rng(0), plate=255.0, ink=0.0,
+                              blur_sigma=0.0, noise_sigma=0.0).astype(float)
+    ink = (255.0 - image) / 255.0
+    rim = cm._disc_rim(c, n, 0.02, 4000)
+    uv, _ = cv2.projectPoints(rim.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), CAM.K, CAM.D)
+    x, y = uv.reshape(-1, 2).T
+    area = 0.5 * abs(np.dot(x, np.roll(y, 1)) - np.dot(y, np.roll(x, 1)))
+    assert abs(ink.sum() - area) / (2 * np.sqrt(np.pi * area)) < 0.005    # 1/200 px of "radius", as above
+    with pytest.raises(ValueError, match='must agree'):
+        cm.render_circles(CAM, [c], [n, n], [0.02], np.random.default_rng(0))

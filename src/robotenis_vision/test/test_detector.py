@@ -1,0 +1,111 @@
+"""detect() on images from two renderers: the independent OpenCV one (simple_render) and the simulator's.
+
+Tolerances: an outline point is found to RESOLUTION_PX = 1/50 px on noise-free blurred discs
+(test_edges), so a noise-free centre is good to that over the ball's apparent radius along the line
+of sight, and over the focal length across it; with noise, the scatter is what the detection's
+covariance predicts (chi-square) and the mean is within that resolution plus 3 standard errors.
+"""
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+import simple_render
+from robotenis_sim import camera_model
+from robotenis_vision import camera as camera_model_vision
+from robotenis_vision import detector
+from robotenis_vision.detector import DetectionError
+
+R = 0.0095
+RESOLUTION_PX = 0.02
+CAM = camera_model_vision.default()
+
+
+def split(error, c):
+    """Error components along the line of sight and across it (m)."""
+    u = c / np.linalg.norm(c)
+    along = error @ u
+    return along, np.linalg.norm(error - np.outer(np.atleast_1d(along), u).reshape(np.shape(error)), axis=-1)
+
+
+def tolerances(c):
+    """Resolution-limited error along the line of sight and across it (m)."""
+    d = np.linalg.norm(c)
+    r_px = CAM.fx * R / d
+    return d * RESOLUTION_PX / r_px, d * RESOLUTION_PX / CAM.fx
+
+
+POSITIONS = [np.array(c) for c in ([0.0, 0.0, 0.2], [0.05, 0.03, 0.2], [0.1, -0.06, 0.3], [-0.12, 0.09, 0.25],
+                                   [0.15, 0.08, 0.45], [0.0, 0.0, 0.15])]
+
+
+@pytest.mark.parametrize('c', POSITIONS)
+def test_noise_free_independent_render_is_measured_to_the_resolution(c):
+    det = detector.detect(simple_render.render(CAM, c, R), CAM, R)
+    along, across = split(det.position - c, c)
+    tol_along, tol_across = tolerances(c)
+    assert abs(along) < tol_along and across < tol_across
+
+
+@pytest.mark.parametrize('c', [POSITIONS[1], POSITIONS[3]])
+def test_scatter_and_bias_with_noise_match_the_covariance(c):
+    rng = np.random.default_rng(11)
+    runs = 25
+    dets = [detector.detect(simple_render.render(CAM, c, R, rng, noise_sigma=2.0), CAM, R) for _ in range(runs)]
+    errors = np.array([d.position for d in dets]) - c
+    P = np.mean([d.covariance for d in dets], axis=0)
+    spread = errors - errors.mean(axis=0)
+    total = np.einsum('ni,ij,nj->', spread, np.linalg.inv(P), spread)
+    dof = 3 * (runs - 1)
+    assert chi2.ppf(0.0005, dof) < total < chi2.ppf(0.9995, dof)
+    along, across = split(errors.mean(axis=0), c)
+    u = c / np.linalg.norm(c)
+    sd_along = np.sqrt(u @ P @ u / runs)
+    sd_across = np.sqrt(max(np.trace(P) - u @ P @ u, 0) / runs)
+    tol_along, tol_across = tolerances(c)
+    assert abs(along) < tol_along + 3 * sd_along
+    assert across < tol_across + 3 * sd_across
+
+
+def test_simulator_render_at_200_mm_on_axis():
+    """Shading, highlight, gradient and textured background, blur and noise: still to the resolution."""
+    c = POSITIONS[0]
+    rng = np.random.default_rng(5)
+    dets = [detector.detect(camera_model.render(CAM, c, R, rng), CAM, R) for _ in range(10)]
+    errors = np.array([d.position for d in dets]) - c
+    P = np.mean([d.covariance for d in dets], axis=0)
+    along, across = split(errors.mean(axis=0), c)
+    tol_along, tol_across = tolerances(c)
+    assert abs(along) < tol_along + 3 * np.sqrt(P[2, 2] / 10)
+    assert across < tol_across + 3 * np.sqrt((P[0, 0] + P[1, 1]) / 10)
+
+
+def test_paper_method_on_axis_is_exact_and_baseline_runs():
+    """On the axis the chords are diameters and eqs. 12/16 are exact; each of the four crossings is
+    good to the resolution plus the sag of the outline polygon between points (spacing^2 / 8 r)."""
+    c = POSITIONS[0]
+    image = simple_render.render(CAM, c, R)
+    paper = detector.detect(image, CAM, R, 'paper')
+    along, across = split(paper.position - c, c)
+    r_px = CAM.fx * R / np.linalg.norm(c)
+    sag = detector.RAY_SPACING ** 2 / (8 * r_px)
+    tol_along, tol_across = ((RESOLUTION_PX + sag) / RESOLUTION_PX * t for t in tolerances(c))
+    assert abs(along) < tol_along and across < tol_across and paper.method == 'paper'
+    base = detector.detect(image, CAM, R, 'baseline')
+    assert base.method == 'baseline' and abs(base.position[2] - c[2]) < 0.1 * c[2]
+
+
+def test_what_cannot_be_measured_is_refused_with_a_reason():
+    blank = np.full((480, 640), 90, np.uint8)
+    with pytest.raises(DetectionError, match='no sphere'):
+        detector.detect(blank, CAM, R)
+    c = np.array([0.13, 0.0, 0.2])
+    assert CAM.project(c)[0] + CAM.fx * R / 0.2 > CAM.width                 # the ball reaches past x = 640
+    cut = simple_render.render(CAM, c, R)
+    with pytest.raises(DetectionError, match='border'):
+        detector.detect(cut, CAM, R)
+    with pytest.raises(DetectionError, match='does not match'):
+        detector.detect(np.zeros((240, 320), np.uint8), CAM, R)
+    with pytest.raises(DetectionError, match='2-D'):
+        detector.detect(np.zeros((480, 640, 3), np.uint8), CAM, R)
+    with pytest.raises(ValueError, match='method'):
+        detector.detect(blank, CAM, R, 'hough')
