@@ -21,8 +21,9 @@ def offline(args):
         dataclasses.replace(rests.RestParameters(), settle=args.settle)
     try:
         outcome = pipeline.calibrate_bag(args.bag_dir, args.out, args.holdout, args.seed, params,
-                                         progress=lambda text: print(f'[calibrate] {text}', file=sys.stderr))
-    except pipeline.CalibrationError as e:
+                                         progress=lambda text: print(f'[calibrate] {text}', file=sys.stderr),
+                                         detector_floor=tuple(args.detector_floor))
+    except (pipeline.CalibrationError, ValueError) as e:
         print(f'robotenis calibrate: {e} ({args.out} not written)', file=sys.stderr)
         return 1
     except KeyboardInterrupt:
@@ -43,6 +44,8 @@ def main(argv=None):
     parser.add_argument('--seed', type=int, default=0, help='random seed (split; pose selection with --call)')
     parser.add_argument('--settle', type=float, default=None,
                         help='s: settle time (--call) or margin skipped at the start of rests found without markers')
+    parser.add_argument('--detector-floor', type=float, nargs=2, default=(0.0, 0.0), metavar=('LATERAL', 'DEPTH'),
+                        help="the detector's systematic error, fractions of the range (this project's: 5e-4 3e-3)")
     parser.add_argument('--call', action='store_true', help='call the calibrate service of a running system')
     parser.add_argument('--poses', type=int, default=0)
     parser.add_argument('--frames', type=int, default=0)

@@ -53,6 +53,8 @@ class CalibrationNode(Node):
         self.declare_parameter('frames_per_pose', 500)
         self.declare_parameter('settle_time', 4.0)
         self.declare_parameter('holdout_fraction', 0.3)
+        # the sphere_detector's systematic error (lateral, depth) as fractions of the range: pipeline.with_detector_floor
+        self.declare_parameter('detector_floor', [5e-4, 3e-3])
         self.declare_parameter('image_topic', '/camera/image_raw')
         self.declare_parameter('images_per_pose', 2)
         self.busy = False
@@ -209,7 +211,8 @@ class CalibrationNode(Node):
         response.bag_path = bag
         outcome = pipeline.calibrate_bag(
             bag, result_path, self.get_parameter('holdout_fraction').value, request.seed,
-            progress=lambda text: self.publish_progress('identifying', len(planned) - 1, len(planned), 1.0, text))
+            progress=lambda text: self.publish_progress('identifying', len(planned) - 1, len(planned), 1.0, text),
+            detector_floor=tuple(self.get_parameter('detector_floor').value))
         d = outcome.diagnosis
         response.success = True
         response.message = (f'{len(planned) - len(skipped)} of {len(planned)} poses measured; '

@@ -36,6 +36,7 @@ class RunnerConfig:
     still_time: float = 0.1            # s of stillness before the settle time starts
     move_timeout: float = 10.0         # s to reach a pose
     measure_timeout: float = 10.0      # s to collect the frames before the pose is skipped
+    no_ball_time: float = 0.5          # s without a single detection: the ball is not in view, skip
 
 
 class SessionRunner:
@@ -110,6 +111,10 @@ class SessionRunner:
         elif self.state == MEASURING:
             if len(self._rest.sphere) >= c.frames_per_pose:
                 self._finish_rest(t)
+            elif not self._rest.sphere and t - self._t_state > c.no_ball_time:
+                self.skipped.append((self.index, f'no detection in {c.no_ball_time:.1f} s (ball not in view?)'))
+                self.actions.append(('rest_end', self.index))
+                self._next_pose(t)
             elif t - self._t_state > c.measure_timeout:
                 self.skipped.append((self.index, f'only {len(self._rest.sphere)} of {c.frames_per_pose} '
                                                  f'detections in {c.measure_timeout:.0f} s (ball not in view?)'))

@@ -250,3 +250,16 @@ def test_joint_states_serialized_by_rclpy_are_read(tmp_path):
     assert stamp == 12_000_000_345 and back.name == ('motor_2', 'motor_1', 'motor_3')
     assert back.position == (0.2, 0.1, 0.3) and back.velocity == (1.0, 2.0, 3.0) and back.effort == ()
     assert reader.notes == []
+
+
+def test_detector_floor_widens_only_the_camera_covariance():
+    from robotenis_calibration.session import Session
+    from robotenis_kinematics import description
+    s = Session(description.nominal(), np.zeros((2, 3)), 1e-5, np.array([[0.0, 0.0, 0.2], [0.01, 0.0, 0.4]]),
+                np.eye(3) * 1e-12, [0.0, 1.0])
+    w = pipeline.with_detector_floor(s, (5e-4, 3e-3))
+    np.testing.assert_allclose(np.diagonal(w.sphere_cov, axis1=1, axis2=2),
+                               1e-12 + np.array([[1e-4 ** 2, 1e-4 ** 2, 6e-4 ** 2], [2e-4 ** 2, 2e-4 ** 2, 1.2e-3 ** 2]]))
+    np.testing.assert_array_equal(s.sphere_cov, np.eye(3)[None] * 1e-12 * np.ones((2, 1, 1)))
+    with pytest.raises(ValueError, match='detector floor'):
+        pipeline.with_detector_floor(s, (-1.0, 0.0))

@@ -56,3 +56,14 @@ def test_no_measurement_while_moving():
     runner.take_actions()
     runner.detection(0.01, np.ones(3), np.eye(3))
     assert runner.state != MEASURING and runner._rest is None
+
+
+def test_a_ball_out_of_view_costs_only_the_no_ball_time():
+    poses = np.array([[0.1, 0, 1.0], [0.2, 0, 1.0]])
+    config = RunnerConfig(frames_per_pose=10, settle_time=0.1, no_ball_time=0.5, measure_timeout=10.0)
+    runner = SessionRunner(poses, config)
+    actions = drive(runner, lambda k: k != 0)
+    starts = {a[1]: t for t, a in actions if a[0] == 'rest_start'}
+    ends = {a[1]: t for t, a in actions if a[0] == 'rest_end'}
+    assert abs(ends[0] - starts[0] - config.no_ball_time) < 0.01
+    assert [r.index for r in runner.rests] == [1]

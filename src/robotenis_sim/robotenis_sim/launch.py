@@ -43,7 +43,7 @@ def default_nodes(truth_path, description_path, sim_time=False, calibration=True
     clock = {'use_sim_time': 'true'} if sim_time else {}
     truth = {'truth_path': truth_path} if truth_path else {}
     desc = {'description_path': description_path}
-    motors = {'publish_clock': 'true', 'lockstep': 'true', 'speed': '0.0'} if sim_time else {}
+    motors = {'publish_clock': 'true', 'lockstep': 'true', 'speed': '0.0', 'clock_decimation': '4'} if sim_time else {}
     ticks = {'tick_on_joint_states': 'true'} if sim_time else {}
     nodes = [
         NodeSpec('sim_motors', 'robotenis_sim', 'sim_motors', {**truth, **motors}),
