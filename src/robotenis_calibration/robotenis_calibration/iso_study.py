@@ -76,12 +76,14 @@ class StaticRobot:
     returns the held readings Theta and the averaged visual measurement s of a circle at C.
     """
 
-    def __init__(self, truth, desc, rng, noise=synthetic.NoiseModel(), resolution=motors.ResolverParameters().resolution):
+    def __init__(self, truth, desc, rng, noise=synthetic.NoiseModel(), resolution=motors.ResolverParameters().resolution,
+                 camera=None, frames=1):
         self.truth, self.desc, self.rng, self.noise, self.q = truth, desc, rng, noise, resolution
+        self.camera, self.frames = camera, frames
         self.last_theta = desc.theta0.copy()
         self.direction = np.ones(3)
 
-    def rest(self, P, C):
+    def rest(self, P, C, plane=None):
         theta = delta.inverse(self.desc, P)
         step = np.sign(theta - self.last_theta)
         self.direction = np.where(step != 0, step, self.direction)
@@ -89,13 +91,27 @@ class StaticRobot:
         Theta = fx.increments_for(self.desc, theta, self.direction, P)
         Theta = np.round((Theta + self.rng.normal(scale=self.noise.sigma_resolver, size=3)) / self.q) * self.q
         arm = self.truth.arm_angles(self.truth.motor_from_reading(Theta), self.direction)
-        return Theta, self.see(delta.forward(self.truth.geometry, arm), C)
+        return Theta, self.see(delta.forward(self.truth.geometry, arm), C, plane)
 
-    def see(self, P_true, C):
-        """Averaged visual measurement (optical frame, m) of the circle centre C with the robot at P_true."""
+    def see(self, P_true, C, plane=None):
+        """Averaged visual measurement (optical frame, m) of the circle centre C with the robot at P_true.
+
+        Without a camera: the truth plus the averaged measurement's noise (Table 3). With one: the
+        mean over ``frames`` images of the plate's circles (``plane``, (n, 3) base frame) rendered
+        through the true camera mounting and measured by robotenis_vision.circle.
+        """
         R = self.truth.camera_rotation
         s = R.T @ (C - P_true - self.truth.camera_translation)
-        return s + self.rng.normal(scale=self.noise.sigma_camera)
+        if self.camera is None:
+            return s + self.rng.normal(scale=self.noise.sigma_camera)
+        from robotenis_sim.camera_model import render_circles
+        from robotenis_vision.circle import measure_circle
+        centres = (np.reshape(plane if plane is not None else C, (-1, 3)) - P_true - self.truth.camera_translation) @ R
+        near = centres[np.abs(centres[:, 0]) < 2 * PITCH + np.abs(s[0])]
+        normals = np.tile(-R.T @ R[:, 2], (len(near), 1))   # the plate faces the camera
+        radii = np.full(len(near), DIAMETER / 2)
+        return np.mean([measure_circle(render_circles(self.camera, near, normals, radii, self.rng), self.camera, DIAMETER)
+                        for _ in range(self.frames)], axis=0)
 
     def position(self, Theta, s):
         """C_est = FK(Theta) + R s with the description's kinematics and effects (constant offset dropped)."""
@@ -104,29 +120,32 @@ class StaticRobot:
         return delta.forward(self.desc, fk) + self.desc.camera_rotation @ s
 
 
-def servo(robot, C, P_guess):
+def servo(robot, C, P_guess, plane=None):
     """Move in front of circle C and correct until it is centred to under a pixel; returns C_est."""
     P, target = np.array(P_guess, dtype=float), np.array([0.0, 0.0, STANDOFF])
     for _ in range(MAX_SERVO_STEPS):
-        Theta, s = robot.rest(P, C)
+        Theta, s = robot.rest(P, C, plane)
         if np.hypot(s[0], s[1]) < PIXEL:
             return robot.position(Theta, s)
         P = P + robot.desc.camera_rotation @ (s - target)
     raise RuntimeError(f'servoing on the circle at {C} did not centre it in {MAX_SERVO_STEPS} steps')
 
 
-def distance_accuracy(truth, desc, plate, camera_offset_guess, repetitions, rng, say=lambda text: None):
+def distance_accuracy(truth, desc, plate, camera_offset_guess, repetitions, rng, say=lambda text: None,
+                      camera=None, frames=1):
     """AD per circle (planes, GRID, GRID) in m: the mean over its neighbour pairs of |D_bar - D_c|.
 
     Each repetition visits every circle of every plane in order (as the robot would, plane by plane).
+    With a ``camera`` (robotenis_vision.camera.Camera) the circles are rendered and measured, ``frames``
+    images per visit; otherwise the averaged measurement is simulated with Table 3's noise.
     """
-    robot = StaticRobot(truth, desc, rng)
+    robot = StaticRobot(truth, desc, rng, camera=camera, frames=frames)
     shape = plate.centres.shape[:3]
     C_est = np.empty((repetitions,) + shape + (3,))
     for j in range(repetitions):
         for index in np.ndindex(*shape):
             C = plate.centres[index]
-            C_est[(j,) + index] = servo(robot, C, C - camera_offset_guess)
+            C_est[(j,) + index] = servo(robot, C, C - camera_offset_guess, plate.centres[index[0]].reshape(-1, 3))
         say(f'distance accuracy: repetition {j + 1}/{repetitions}')
     AD = np.zeros(shape)
     count = np.zeros(shape)

@@ -17,5 +17,5 @@ def test_quick_report_has_every_section_and_its_figures(tmp_path):
     assert {r[0] for r in rows} == set(EFFECTS)
     assert all(r[1] == r[2] for r in rows)
     # The static tests: the calibrated models position better than the nominal one on the plate.
-    means = dict(re.findall(r'<tr><td>([\w ()-]+)</td><td>([\d.]+)</td><td>[\d.]+</td><td>[\d.]+</td></tr>', page))
+    means = dict(re.findall(r'<tr><td>([\w ()-]+)</td><td>([\d.]+)</td><td>[\d.]+</td><td>[\d.]+</td><td>[\d.]+</td></tr>', page))
     assert float(means['final (residual loop)']) < float(means['plain 15-parameter']) < float(means['nominal'])
