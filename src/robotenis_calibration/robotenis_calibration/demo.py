@@ -138,7 +138,7 @@ def main(argv=None):
     parser.add_argument('--out', default='report/demo', help='folder for result.yaml, residuals.png and the bag')
     parser.add_argument('--offline', action='store_true', help='parts 1 and 2 only (no ROS)')
     parser.add_argument('--ros-poses', type=int, default=90, help='poses of the session through ROS')
-    parser.add_argument('--frames', type=int, default=20, help='camera frames averaged per pose')
+    parser.add_argument('--frames', type=int, default=30, help='camera frames averaged per pose')
     parser.add_argument('--settle', type=float, default=0.3, help='settle time at each pose (s)')
     args = parser.parse_args(argv)
     nominal, truth = description.nominal(), sim_truth.load()

@@ -27,7 +27,7 @@ from robotenis_kinematics import identification as idf
 
 ALPHA = 0.01
 CANDIDATES = ('joint_scale', 'base_geometry', 'hand_eye_rotation', 'backlash', 'gravity_compliance')
-FEATURES = ('joint angle', 'joint angle squared', 'motion direction', 'gravity torque',
+FEATURES = ('joint angle', 'joint angle squared', 'motion direction', 'gravity torque', 'range',
             'image x', 'image y', 'time')
 
 
@@ -163,6 +163,7 @@ def residual_features(model, meas, sphere, stamps):
         'gravity torque': effects.gravity_torque(model.desc, P, theta),
         'image x': sphere[:, 0] / sphere[:, 2],
         'image y': sphere[:, 1] / sphere[:, 2],
+        'range': sphere[:, 2],          # the detector's depth error grows with it
         'time': np.asarray(stamps, dtype=float),
     }
 

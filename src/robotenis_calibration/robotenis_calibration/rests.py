@@ -219,10 +219,26 @@ def unbiased_precision_factor(n, p):
     return (n - 1) / (n - p - 2)
 
 
+MOVED = 2e-4   # rad: a joint this far from its rest value was moving toward it (5 counts and the noise)
+
+
+def approach_direction(t_joint, Theta, t0, rest, previous):
+    """Sign of each joint's motion into a rest starting at t0 with mean readings ``rest`` (3,): from the
+    last reading before t0 farther than MOVED from it; a joint that did not move keeps ``previous``.
+    The joint states show the motion through every pose visited, measured or not."""
+    before = Theta[:np.searchsorted(t_joint, t0)]
+    out = np.array(previous, dtype=float)
+    for j in range(3):
+        away = np.flatnonzero(np.abs(before[:, j] - rest[j]) > MOVED)
+        if len(away):
+            out[j] = np.sign(rest[j] - before[away[-1], j])
+    return out
+
+
 def average(rec, windows, params, notes):
     """The Session of the rests in ``windows`` (see the module docstring); skipped rests go to notes."""
     _, q = resolver_noise(rec.Theta)
-    rows, rejected, total = [], 0, 0
+    rows, rejected, total, direction = [], 0, 0, np.ones(3)
     for t0, t1, label in windows:
         sphere = rec.sphere[np.searchsorted(rec.t_sphere, t0):np.searchsorted(rec.t_sphere, t1, side='right')]
         Theta = rec.Theta[np.searchsorted(rec.t_joint, t0):np.searchsorted(rec.t_joint, t1, side='right')]
@@ -239,14 +255,15 @@ def average(rec, windows, params, notes):
                          f'(at least {params.min_samples} needed), skipped')
             continue
         rejected, total = rejected + len(sphere) - n, total + len(sphere)
+        direction = approach_direction(rec.t_joint, rec.Theta, t0, th, direction)
         rows.append((th, np.sqrt(np.diag(T) / n_T * unbiased_precision_factor(n_T, 1)), s,
-                     S / n * unbiased_precision_factor(n, 3), 0.5 * (t0 + t1), n))
+                     S / n * unbiased_precision_factor(n, 3), 0.5 * (t0 + t1), n, direction))
     notes.append(f'{rejected} of {total} finite camera frames in the rests rejected as outliers')
     if not rows:
         return Session(rec.description, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)),
-                       np.zeros((0, 3, 3)), np.zeros(0), np.zeros(0, dtype=int))
-    Theta, sigma, sphere, cov, stamps, samples = (np.array(v) for v in zip(*rows))
-    return Session(rec.description, Theta, sigma, sphere, cov, stamps, samples)
+                       np.zeros((0, 3, 3)), np.zeros(0), np.zeros(0, dtype=int), np.zeros((0, 3)))
+    Theta, sigma, sphere, cov, stamps, samples, direction = (np.array(v) for v in zip(*rows))
+    return Session(rec.description, Theta, sigma, sphere, cov, stamps, samples, direction)
 
 
 def load_session(bag_dir, params=RestParameters(), progress=None):

@@ -24,6 +24,8 @@ class Session:
     sphere_cov : (K, 3, 3) covariance of each averaged sphere centre, m^2.
     stamps : (K,) time of each rest (middle of the averaging window), s.
     samples : (K,) number of camera frames averaged at each rest.
+    direction : (K, 3) sign of each joint's last motion before each rest, when the recording shows it
+        (poses visited but not measured lie between rests); by default from the order of Theta.
     """
 
     description: object
@@ -33,6 +35,7 @@ class Session:
     sphere_cov: np.ndarray
     stamps: np.ndarray
     samples: np.ndarray = field(default=None)
+    direction: np.ndarray = field(default=None)
 
     def __post_init__(self):
         K = len(self.Theta)
@@ -42,6 +45,9 @@ class Session:
         self.sphere_cov = np.broadcast_to(np.asarray(self.sphere_cov, dtype=float), (K, 3, 3)).copy()
         self.stamps = np.asarray(self.stamps, dtype=float).reshape(K)
         self.samples = np.ones(K, dtype=int) if self.samples is None else np.asarray(self.samples, dtype=int)
+        if self.direction is None:
+            self.direction = effects.motion_direction(self.Theta)
+        self.direction = np.asarray(self.direction, dtype=float).reshape(K, 3)
 
     def __len__(self):
         return len(self.Theta)
@@ -49,7 +55,7 @@ class Session:
     def subset(self, index):
         """The rests selected by ``index`` (visit order is kept for a sorted index)."""
         return Session(self.description, self.Theta[index], self.sigma_Theta[index], self.sphere[index],
-                       self.sphere_cov[index], self.stamps[index], self.samples[index])
+                       self.sphere_cov[index], self.stamps[index], self.samples[index], self.direction[index])
 
     def measurements(self, camera_rotation=None):
         """Incremental measurements for identification (eq. 3).
@@ -62,8 +68,8 @@ class Session:
         R = self.description.camera_rotation if camera_rotation is None else camera_rotation
         Pi = -self.sphere @ R.T
         cov = np.einsum('ab,kbc,dc->kad', R, self.sphere_cov, R)
-        return Measurements(self.Theta, Pi, self.sigma_Theta, cov)
+        return Measurements(self.Theta, Pi, self.sigma_Theta, cov, self.direction)
 
     def motion_direction(self):
-        """Sign (+1/-1) of each joint's last motion before each rest (K, 3), from the visit order."""
-        return effects.motion_direction(self.Theta)
+        """Sign (+1/-1) of each joint's last motion before each rest (K, 3)."""
+        return self.direction
