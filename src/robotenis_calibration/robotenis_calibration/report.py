@@ -145,7 +145,7 @@ def section_static(nominal, truth, n, quick, out_dir, say):
         rendered[name] = iso_study.distance_accuracy(robot, desc, plate, offset_guess, 1, np.random.default_rng(13),
                                                      camera=vision_camera.default())
     paper_mean = paper.DISTANCE_ACCURACY_MEAN
-    ad_rows = [[name, f'{AD.mean() * 1e3:.3f}', f'{AD.max() * 1e3:.3f}', f'{rendered[name].mean() * 1e3:.3f}',
+    ad_rows = [[name, f'{AD.mean() * 1e3:.4f}', f'{AD.max() * 1e3:.4f}', f'{rendered[name].mean() * 1e3:.4f}',
                 f'{paper_mean["nominal"] if name == "nominal" else paper_mean["calibrated"]:.3f}']
                for name, AD in maps.items()]
     rp_rows = []
