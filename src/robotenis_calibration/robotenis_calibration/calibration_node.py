@@ -16,10 +16,8 @@ import os
 import time
 
 import numpy as np
-import rclpy
 from geometry_msgs.msg import PointStamped
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from rclpy.serialization import serialize_message
@@ -32,7 +30,7 @@ from robotenis_calibration.session_runner import DONE, MEASURING, RunnerConfig, 
 from robotenis_interfaces.msg import CalibrationProgress, RestMarker, SphereDetection
 from robotenis_interfaces.srv import Calibrate
 from robotenis_kinematics import description
-from robotenis_kinematics.ros import joint_vector
+from robotenis_kinematics.ros import joint_vector, spin
 
 RECORDED = {  # topic -> (message class, ROS type name)
     '/joint_states': (JointState, 'sensor_msgs/msg/JointState'),
@@ -226,16 +224,5 @@ class CalibrationNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = CalibrationNode()
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    try:
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        executor.shutdown()
-        node.close_bag()
-        node.destroy_node()
-        rclpy.try_shutdown()
+    return spin(CalibrationNode, 'calibration', (ValueError, description.DescriptionError), args,
+                finish=CalibrationNode.close_bag)

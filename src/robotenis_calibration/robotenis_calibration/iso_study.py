@@ -28,6 +28,9 @@ from robotenis_calibration import iso9283
 from robotenis_control import controller as ctl
 from robotenis_kinematics import delta, effects as fx, synthetic
 from robotenis_sim import motors
+from robotenis_sim.camera_model import render_circles
+from robotenis_sim.truth import JointReadings
+from robotenis_vision.circle import measure_circle
 
 GRID, PITCH, DIAMETER = 5, 0.100, 0.040        # the plate: 5 x 5 circles (m)
 PLANE_SPACING, STANDOFF = 0.100, 0.200          # m
@@ -104,8 +107,6 @@ class StaticRobot:
         s = R.T @ (C - P_true - self.truth.camera_translation)
         if self.camera is None:
             return s + self.rng.normal(scale=self.noise.sigma_camera)
-        from robotenis_sim.camera_model import render_circles
-        from robotenis_vision.circle import measure_circle
         centres = (np.reshape(plane if plane is not None else C, (-1, 3)) - P_true - self.truth.camera_translation) @ R
         near = centres[np.abs(centres[:, 0]) < 2 * PITCH + np.abs(s[0])]
         normals = np.tile(-R.T @ R[:, 2], (len(near), 1))   # the plate faces the camera
@@ -172,7 +173,6 @@ def repeatability(truth, mass, desc, speed, loops, rng, settle=0.3, say=lambda t
     The truth's robot (geometry, masses, joint effects) under the motion controller with ``desc``;
     the circle sits 200 mm in front of the camera at the focus point.
     """
-    from robotenis_sim.truth import JointReadings
     sim = motors.SimulatedMotors(truth.geometry, mass, rng=rng, joint_effects=JointReadings(truth))
     control = ctl.MotionController(desc, max_speed=speed, max_acceleration=4 * 9.81)
     points = five_points(CUBE_CENTRE)

@@ -21,12 +21,12 @@ def joint_vector(msg, field):
     return np.array([values[index[j]] for j in JOINTS], dtype=float)
 
 
-def spin(make_node, name, fatal=(ValueError,), args=None):
+def spin(make_node, name, fatal=(ValueError,), args=None, finish=None):
     """Run one node on a SingleThreadedExecutor until Ctrl-C or shutdown; returns the exit code.
 
     ``fatal`` errors raised while building the node (a bad parameter, an unreadable file) are printed
     as ``name: message`` and give exit code 2. Shutdown goes in the order rclpy needs: executor,
-    node, context.
+    ``finish(node)`` (e.g. close a file the node writes), node, context.
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -45,6 +45,8 @@ def spin(make_node, name, fatal=(ValueError,), args=None):
     finally:
         executor.shutdown()
         if node is not None:
+            if finish is not None:
+                finish(node)
             node.destroy_node()
         rclpy.try_shutdown()
     return 0

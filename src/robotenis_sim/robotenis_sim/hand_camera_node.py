@@ -17,15 +17,14 @@ hand_camera.yaml), ball ('fixed' or 'chaotic'), ball_max_speed (m/s), seed (-1: 
 import sys
 
 import numpy as np
-import rclpy
 from geometry_msgs.msg import PointStamped
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.time import Time
 from sensor_msgs.msg import CameraInfo, Image
 
 from robotenis_kinematics.description import DescriptionError
+from robotenis_kinematics.ros import spin
 from robotenis_sim import ball as sim_ball, camera_model, truth as sim_truth
 from robotenis_vision import camera as vision_camera
 
@@ -106,21 +105,7 @@ class HandCameraNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = HandCameraNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (DescriptionError, vision_camera.CameraError, ValueError) as e:
-        print(f'hand_camera: {e}', file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return spin(HandCameraNode, 'hand_camera', (DescriptionError, vision_camera.CameraError, ValueError), args)
 
 
 if __name__ == '__main__':

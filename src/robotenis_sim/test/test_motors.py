@@ -96,6 +96,17 @@ def test_joint_effects_hook_sits_between_joint_and_reading(desc):
     np.testing.assert_allclose(sim.read()[0], np.round(offset / q) * q)
 
 
+def move_to(sim, controller, goal, steps):
+    """The closed loop at 1 kHz for ``steps`` periods, with ``goal`` given after the first reading."""
+    for k in range(steps):
+        Theta, dTheta = sim.read()
+        ref, _ = controller.update(k * sim.dt, Theta, dTheta)
+        if k == 0:
+            controller.add_goal(goal, 0.0)
+        sim.set_command(ref)
+        sim.step()
+
+
 def test_closed_loop_reaches_a_goal_within_the_resolver_resolution(desc):
     """Controller and robot share geometry and masses: at rest after the move, the joint error is the
     static loop's: the readings' quantisation and noise (a few counts), so the effector is within
@@ -104,13 +115,7 @@ def test_closed_loop_reaches_a_goal_within_the_resolver_resolution(desc):
     sim = motors.SimulatedMotors(desc, mass, rng=np.random.default_rng(7))
     c = ctl.MotionController(desc, mass, max_speed=2.0, max_acceleration=4 * dyn.G)
     goal = np.array([-0.2, 0.2, 0.75])
-    for k in range(700):
-        Theta, dTheta = sim.read()
-        ref, _ = c.update(k * sim.dt, Theta, dTheta)
-        if k == 0:
-            c.add_goal(goal, 0.0)
-        sim.set_command(ref)
-        sim.step()
+    move_to(sim, c, goal, 700)
     P, dP = sim.effector()
     J = delta.jacobian(desc, P)
     bound = np.linalg.norm(J, 2) * 4 * sim.resolver.resolution
@@ -133,13 +138,7 @@ def test_a_calibrated_models_joint_effects_bring_the_robot_to_the_goal(desc):
         sim = motors.SimulatedMotors(truth.geometry, mass, rng=np.random.default_rng(8),
                                      joint_effects=sim_truth.JointReadings(truth))
         c = ctl.MotionController(model, mass, max_speed=2.0, max_acceleration=4 * dyn.G)
-        for k in range(800):
-            Theta, dTheta = sim.read()
-            ref, _ = c.update(k * sim.dt, Theta, dTheta)
-            if k == 0:
-                c.add_goal(goal, 0.0)
-            sim.set_command(ref)
-            sim.step()
+        move_to(sim, c, goal, 800)
         errors.append(np.linalg.norm(sim.effector()[0] - goal))
     bound = np.linalg.norm(delta.jacobian(truth.geometry, goal), 2) * 4 * motors.ResolverParameters().resolution
     assert errors[0] < bound < errors[1], (errors, bound)

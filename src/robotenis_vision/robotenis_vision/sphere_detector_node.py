@@ -16,15 +16,14 @@ about half the time at rest; the detector searches the whole image when it does 
 import sys
 
 import numpy as np
-import rclpy
 from geometry_msgs.msg import PointStamped
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 
 from robotenis_interfaces.msg import SphereDetection
 from robotenis_kinematics import description
+from robotenis_kinematics.ros import spin
 from robotenis_vision import averaging, camera as camera_model, detector
 
 ENCODINGS = ('mono8', '8UC1')
@@ -128,21 +127,7 @@ class SphereDetectorNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = SphereDetectorNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, description.DescriptionError) as e:
-        print(f'sphere_detector: {e}', file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return spin(SphereDetectorNode, 'sphere_detector', (ValueError, description.DescriptionError), args)
 
 
 if __name__ == '__main__':
