@@ -259,7 +259,12 @@ def ransac_sphere(xy, R, f, threshold_px=1.0, trials=32, rng=None):
     return c, np.abs(f * sampson(xy, c, R)) < threshold_px
 
 
-def fit_sphere(xy, R, f, weights=None):
-    """Taubin conic -> closed-form centre (C2) -> geometric refinement: a SphereFit."""
-    c0 = sphere_from_conic(taubin(xy, weights), R)
+def fit_sphere(xy, R, f, weights=None, c0=None):
+    """Taubin conic -> closed-form centre (C2) -> geometric refinement: a SphereFit.
+
+    ``c0``: a sphere whose outline lies within a pixel or so of the points (the one the outline was
+    searched along); the refinement then starts from it and the conic is not needed.
+    """
+    if c0 is None:
+        c0 = sphere_from_conic(taubin(xy, weights), R)
     return refine_sphere(xy, c0, R, f, weights)

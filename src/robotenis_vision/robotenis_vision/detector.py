@@ -80,31 +80,32 @@ def detect(image, camera, radius, method='conic', prior=None):
         from robotenis_vision import baseline
         return baseline.detect(img, camera, radius)
     try:
-        ideal, fit, sigma = outline(img, camera, radius, prior)
+        ideal, fit, sigma, c0 = outline(img, camera, radius, prior)
     except DetectionError:
         if prior is None:
             raise
-        ideal, fit, sigma = outline(img, camera, radius)
+        ideal, fit, sigma, c0 = outline(img, camera, radius)
     xy = camera.to_normalized(ideal)
     weights = 1.0 / np.maximum(fit.sigma_e, 0.02) ** 2      # floored: no point outweighs the rest
     if method in ('paper', 'tangent'):
         from robotenis_vision import paper_method
-        c = _conic(xy, ideal, camera, radius, weights).position
+        c = _conic(xy, ideal, camera, radius, weights, c0).position
         _check_arc(ideal, camera.to_pixels(c[:2] / c[2]))
         det = paper_method.detect_from_outline(img, camera, radius, xy, sigma, _window(camera, c, radius, sigma),
                                                0 if method == 'tangent' else None)
     else:
-        det = _conic(xy, ideal, camera, radius, weights)
+        det = _conic(xy, ideal, camera, radius, weights, c0)
         _check_arc(det.edge_points, camera.to_pixels(det.position[:2] / det.position[2]))
     det.extra['psf_sigma'] = sigma
     return det
 
 
-def _conic(xy, ideal, camera, radius, weights):
-    """The exact method on outline points (normalized xy, ideal pixels); covariance inflated for the
-    correlation of neighbouring points' errors (conic.correlation_inflation)."""
+def _conic(xy, ideal, camera, radius, weights, c0):
+    """The exact method on outline points (normalized xy, ideal pixels), refined from the sphere c0
+    whose outline they were found along; covariance inflated for the correlation of neighbouring
+    points' errors (conic.correlation_inflation)."""
     try:
-        sphere = conic.fit_sphere(xy, radius, camera.fx, weights)
+        sphere = conic.fit_sphere(xy, radius, camera.fx, weights, c0)
     except conic.ConicError as e:
         raise DetectionError(str(e)) from None
     inflation = conic.correlation_inflation(sphere.residuals_px[sphere.inliers])
@@ -124,7 +125,8 @@ def search(img, camera, radius):
 
 
 def outline(img, camera, radius, prior=None):
-    """Outline points (n, 2) in ideal pixels, their edges.ProfileFit and the frame's blur sigma (px).
+    """Outline points (n, 2) in ideal pixels, their edges.ProfileFit, the frame's blur sigma (px) and
+    the sphere (m) whose outline the profiles were laid along.
 
     The profiles look for the edge within edges.REACH of the predicted outline; when the outline
     found lies near that limit on average, the prediction was off and the profiles are laid again
@@ -153,7 +155,7 @@ def outline(img, camera, radius, prior=None):
     keep = fit.ok
     points = pts[keep] + fit.e[keep, None] * normals[keep]
     fields = ('e', 'sigma_e', 'contrast', 'rms', 'ok', 'inside')
-    return points, edges.ProfileFit(*(getattr(fit, k)[keep] for k in fields)), blur
+    return points, edges.ProfileFit(*(getattr(fit, k)[keep] for k in fields)), blur, c
 
 
 def _profiles(img, camera, c, radius, blur, refit_blur):
