@@ -117,6 +117,7 @@ def over_range(frames=2):
     positions = [(0, 0), (0.7, 0.6), (-0.7, 0.6), (0.7, -0.6), (-0.7, -0.6)]
     errors = {m: {} for m in METHODS}
     failures = {m: 0 for m in METHODS}
+    split = {m: {} for m in METHODS}      # (z, light, position) -> [(depth, lateral (2,)) per frame], mm
     for z in RANGES:
         for light in LIGHTS:
             for p in positions:
@@ -127,6 +128,7 @@ def over_range(frames=2):
                         failures[m] += failed
                         if len(e):
                             errors[m].setdefault((z, light), []).append(np.linalg.norm(e[0]))
+                            split[m].setdefault((z, light, p), []).append(along_ray(e[0], c))
     print('   range m   ' + ''.join(f'{m:>10s}' for m in METHODS) + '   (RMS 3D error over positions and lighting)')
     for z in RANGES:
         row = [np.sqrt(np.mean(np.concatenate([errors[m].get((z, L), []) for L in LIGHTS]) ** 2)) for m in METHODS]
@@ -139,6 +141,7 @@ def over_range(frames=2):
     n = len(RANGES) * len(LIGHTS) * len(positions) * frames
     print('   all       ' + ''.join(f'{total[m]:10.3f}' for m in METHODS))
     print('   failed    ' + ''.join(f'{failures[m]:7d}/{n}' for m in METHODS) + '   (RMS over the frames each measured)')
+    bias_and_precision(split)
     ratio = total['baseline'] / total['conic']
     worst = min(np.sqrt(np.mean(np.concatenate([errors['baseline'].get((z, L), []) for L in LIGHTS]) ** 2))
                 / np.sqrt(np.mean(np.concatenate([errors['conic'].get((z, L), []) for L in LIGHTS]) ** 2))
@@ -159,6 +162,35 @@ def timed(fn, items, repeats=3):
             times.append(time.perf_counter() - t)
     cpu = (time.process_time() - cpu) / len(times)
     return float(np.median(times)), float(np.percentile(times, 5)), cpu
+
+
+def along_ray(e, c):
+    """An error e (3,) split into its component along the line of sight to c (depth, signed: + too
+    far) and the two across it (lateral), in the frame of the ray."""
+    u = c / np.linalg.norm(c)
+    a = np.cross(u, [0.0, 1.0, 0.0])
+    a /= np.linalg.norm(a)
+    return e @ u, np.array([e @ a, e @ np.cross(u, a)])
+
+
+def bias_and_precision(split):
+    """Per range: bias (RMS over scenes of the mean error of a scene's frames) and precision (RMS of
+    the frames' deviations from their scene's mean, n/(n-1) corrected), depth and lateral, mm."""
+    print('   bias and precision per range (over positions and lighting), mm: depth along the line of sight,')
+    print('   lateral across it; bias = RMS of each scene\'s mean error, precision = std of frames about it')
+    print('   range m  ' + ''.join(f'{m + ": depth bias/std; lateral bias/std":>44s}' for m in ('conic', 'baseline')))
+    for z in RANGES:
+        cells = []
+        for m in ('conic', 'baseline'):
+            scenes = [v for k, v in split[m].items() if k[0] == z and len(v) > 1]
+            figures = []
+            for part in (lambda f: np.array([f[0]]), lambda f: f[1]):       # depth, lateral
+                x = [np.array([part(f) for f in v]) for v in scenes]
+                bias = np.sqrt(np.mean([np.sum(v.mean(axis=0) ** 2) for v in x]))
+                dev = np.sum([np.sum((v - v.mean(axis=0)) ** 2) for v in x]) / np.sum([(len(v) - 1) * v.shape[1] for v in x])
+                figures.append(f'{bias:7.3f} /{np.sqrt(dev):7.3f}')
+            cells.append(';  '.join(figures))
+        print(f'   {z:6.2f}  ' + ''.join(f'{c:>44s}' for c in cells))
 
 
 def speed():
