@@ -79,6 +79,22 @@ def test_simulator_render_at_200_mm_on_axis():
     assert across < tol_across + 3 * np.sqrt((P[0, 0] + P[1, 1]) / 10)
 
 
+@pytest.mark.parametrize('c', [POSITIONS[1], POSITIONS[4]])
+def test_a_prior_from_the_last_frame_gives_the_same_centre(c):
+    """The node's stream: the outline looked for where the previous frame's sphere was (the ball
+    moved half a pixel since) and the sphere refined from it, to the same resolution as from
+    scratch; a prior 30 px off falls back to the search."""
+    image = simple_render.render(CAM, c, R)
+    moved = c + np.array([0.5, -0.3, 0.0]) * c[2] / CAM.fx
+    prior = detector.detect(simple_render.render(CAM, moved, R), CAM, R)
+    tol_along, tol_across = tolerances(c)
+    far = detector.Detection(c + np.array([30.0, 0.0, 0.0]) * c[2] / CAM.fx, prior.covariance,
+                             prior.edge_points, 0.0, 'conic', dict(prior.extra))
+    for seed in (prior, far):
+        along, across = split(detector.detect(image, CAM, R, prior=seed).position - c, c)
+        assert abs(along) < tol_along and across < tol_across
+
+
 def test_paper_method_on_axis_is_exact_and_baseline_runs():
     """On the axis the chords are diameters and eqs. 12/16 are exact; each of the four crossings is
     good to the resolution plus the sag of the outline polygon between points (spacing^2 / 8 r)."""
