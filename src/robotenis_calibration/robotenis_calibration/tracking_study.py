@@ -13,10 +13,11 @@ position-based visual servoing law of eqs. 23-25 (robotenis_control.pbvs). Per r
 - the hand camera at 120 Hz (one frame every 8.33 ms): the ball's position s in the optical frame
   from the TRUE effector and ball positions through the TRUE camera mounting, plus Gaussian noise of
   one detection (``SIGMA_FRAME``), delivered one frame period late (the paper's visual loop delay);
-- on each delivered detection: e_r = -R (s - s_d) with s_d = (0, 0, 600 mm) (the ball centred at
-  600 mm, as in the paper), v_p from the ball's Kalman filter (pbvs.BallKalman) on the ball's base-frame
-  position P_est + R s (P_est: forward kinematics of the description on the resolvers read at the
-  exposure), u_r = -K_p e_r + v_p (eq. 23, K_p = 16.8), sent to the motion controller.
+- on each delivered detection, what pbvs.Tracker does: e_r = -R (s - s_d) with s_d = (0, 0, 600 mm)
+  (the ball centred at 600 mm, as in the paper), v_p from the ball's Kalman filter (pbvs.BallKalman)
+  on the ball's base-frame position P_est + R s (P_est: forward kinematics of the description on the
+  resolvers read at the exposure), u_r = -K_p e_r + v_p (eq. 23, K_p = 16.8), sent to the motion
+  controller.
 
 The tracking error is what the paper reports (Table 5: "the mean of the tracking errors in
 millimetres when 10 tests are done"): per test, the mean over its samples of |e_r| from the visual
@@ -24,13 +25,15 @@ measurement; per speed, the mean (and spread) over the tests. The true error |s_
 the camera's noise, is recorded beside it. Nominal and calibrated runs of one test see the same ball,
 the same camera noise and the same resolver noise (a paired comparison).
 
-Speed. Two engines run the same loop: ``ScalarPlant`` steps the project's SimulatedMotors and
-MotionController objects one robot at a time (the reference), ``BatchPlant`` steps all runs of one
-description at once with the same equations vectorised over runs (robotenis_control.dynamics'
-forward and inverse dynamics, motors.rk4_step, controller.velocity_command); a test checks that both
-give the same errors. A scalar step costs about 0.5 ms per robot (the 100 runs of 42 s would take 40
-minutes); a batch step costs a few ms almost whatever its width, so each test is also cut into
-segments of ``Setup.segment_samples`` frames simulated side by side, each after its own warm-up.
+Speed. Two engines run the same loop: ``ScalarPlant`` and ``TrackerServo`` step the project's
+SimulatedMotors, MotionController and pbvs.Tracker objects one robot at a time (the reference, what
+the ROS nodes run), ``BatchPlant`` and ``BatchServo`` step all runs of one description at once with
+the same equations vectorised over runs (robotenis_control.dynamics' forward and inverse dynamics,
+motors.rk4_step, controller.velocity_command, one BallKalman carrying every run's state); a test
+checks that both give the same errors. A scalar step costs about 0.5 ms per robot (the 100 runs of
+42 s would take 40 minutes); a batch step costs a few ms almost whatever its width, so each test is
+also cut into segments of ``Setup.segment_samples`` frames simulated side by side, each after its
+own warm-up.
 
 Without the velocity feedforward (``Setup(feedforward=False)``) the law is the pure proportional
 -K_p e_r: the baseline of benchmarks/tracking.py. ``noise_response`` predicts the error on a still
@@ -58,10 +61,7 @@ SPEEDS = (0.5, 0.75, 1.0, 1.25, 1.5)      # m/s: Table 5's maximum ball speeds
 TESTS, SAMPLES = 10, 5000                  # the paper: 10 tests of 5,000 samples per speed
 QUICK_TESTS, QUICK_SAMPLES = 2, 1000
 FRAME_PERIOD = 1.0 / 120.0                 # s: the camera's 120 Hz (8.34 ms in the paper)
-# One detection's noise along the optical x, y, z (m). Table 2 gives single frames at 200 mm
-# (0.014, 0.038, 0.092 mm; Table 3 is for averages of 500 frames); at 600 mm the lateral noise grows
-# with the distance (x3) and the depth noise, from the apparent size, with its square (x9).
-SIGMA_FRAME = (0.042e-3, 0.114e-3, 0.83e-3)
+SIGMA_FRAME = pbvs.SIGMA_CAMERA            # m: one detection's noise, Table 2 scaled to 600 mm
 # The region the robot works in: the 400 mm cube of the static tests (section 6.1), centred in the
 # Jacobian study's cylinder (section 6.2.1); the ball flies the same cube shifted by the camera offset.
 ROBOT_CENTRE = (0.0, 0.0, float(np.mean(jacobian_study.Z_RANGE)))
@@ -75,21 +75,26 @@ class Setup:
 
     K_p (1/s) and s_d (m, optical frame) are eq. 23's gain and reference; ``feedforward`` adds the
     Kalman velocity v_p (False: the pure proportional baseline); ``kalman_q`` is BallKalman's
-    white-acceleration density (m^2/s^3); ``max_speed`` clips u_r (m/s) as the motion controller
-    does; ``latency_frames`` is the visual loop delay in frame periods; ``warmup_frames`` are run
-    before the samples are counted (the robot starts at the reference, the filter at rest);
-    ``segment_samples`` is the longest stretch of a test simulated in one piece (see ``run_description``).
+    white-acceleration density (m^2/s^3); ``sigma_camera`` is one detection's noise and
+    ``camera_bias`` its systematic error (m, optical x, y, z); ``filter_sigma`` is the noise the
+    ball's filter assumes (None: sigma_camera; a live tracker assumes pbvs.SIGMA_CAMERA whatever its
+    detector does); ``max_speed`` clips u_r (m/s) as the motion controller does; ``latency_frames``
+    is the visual loop delay in frame periods; ``warmup_frames`` are run before the samples are
+    counted (the robot starts at the reference, the filter at rest); ``segment_samples`` is the
+    longest stretch of a test simulated in one piece (see ``run_description``).
     """
 
     K_p: float = pbvs.K_P
     s_d: tuple = tuple(pbvs.S_DESIRED)
     feedforward: bool = True
-    kalman_q: float = pbvs.BallKalman().q
+    kalman_q: float = pbvs.KALMAN_Q
     sigma_camera: tuple = SIGMA_FRAME
+    camera_bias: tuple = (0.0, 0.0, 0.0)
+    filter_sigma: tuple = None
     frame_period: float = FRAME_PERIOD
     latency_frames: int = 1
     warmup_frames: int = 60
-    max_speed: float = 2.5
+    max_speed: float = pbvs.MAX_SPEED
     dt: float = 1e-3
     resolver_noise: float = motors.ResolverParameters.noise
     robot_centre: tuple = ROBOT_CENTRE
@@ -104,14 +109,19 @@ class Setup:
         if self.latency_frames < 0 or self.warmup_frames < 0 or self.resolver_noise < 0 or self.segment_samples < 1:
             raise ValueError("tracking setup: latency_frames, warmup_frames, resolver_noise must be >= 0 "
                              "and segment_samples >= 1")
-        for name in ('s_d', 'sigma_camera', 'robot_centre', 'half_size'):
+        for name in ('s_d', 'sigma_camera', 'camera_bias', 'robot_centre', 'half_size', 'assumed_sigma'):
             if np.shape(getattr(self, name)) != (3,) or not np.all(np.isfinite(getattr(self, name))):
                 raise ValueError(f"tracking setup: {name} must have three finite components, "
                                  f"got {getattr(self, name)!r}")
-        if min(self.sigma_camera) < 0 or min(self.half_size) <= 0:
-            raise ValueError("tracking setup: sigma_camera must be >= 0 and half_size > 0")
+        if min(self.sigma_camera) < 0 or min(self.assumed_sigma) < 0 or min(self.half_size) <= 0:
+            raise ValueError("tracking setup: sigma_camera and filter_sigma must be >= 0 and half_size > 0")
         if self.frame_period < self.dt:
             raise ValueError(f"tracking setup: the frame period {self.frame_period} s is shorter than a control tick")
+
+    @property
+    def assumed_sigma(self):
+        """The detection noise the ball's filter assumes (m, optical x, y, z)."""
+        return self.sigma_camera if self.filter_sigma is None else self.filter_sigma
 
 
 @dataclass
@@ -299,61 +309,96 @@ class GroupFilter:
         return self.kf.velocity
 
 
-class VisualLoop:
-    """The hand camera and the visual servoing law around a plant: one call per exposure.
+class BatchServo:
+    """pbvs.Tracker's law for every run at once, vectorised: one GroupFilter per description.
 
-    An exposure measures every run's ball in the optical frame from the TRUE positions and mounting
-    plus the camera noise, and remembers the description's forward kinematics of the joints read at
-    that tick; the detection is served ``latency_frames`` exposures later: the ball's filter, eq. 23,
-    and the command to the plant. Errors of the counted frames (after the warm-up) go to
-    ``e_visual`` (|s - s_d|, the measurement) and ``e_true`` (|s_true - s_d|), each (N, n_samples), m.
+    u_r is not clipped here: BatchPlant clips it to the same max_speed, as the motion controller does.
     """
 
-    def __init__(self, plant, descs, balls, truth, setup, n_samples, rng):
-        self.plant, self.descs, self.balls, self.truth, self.setup, self.rng = plant, descs, balls, truth, setup, rng
-        self.groups = _groups(descs)
+    def __init__(self, descs, setup):
+        self.setup, self.groups = setup, _groups(descs)
         self.theta0 = np.array([d.theta0 for d in descs])
-        noise = NoiseModel(sigma_camera=setup.sigma_camera)
+        noise = NoiseModel(sigma_camera=setup.assumed_sigma)
         self.filters = [GroupFilter(setup.kalman_q, noise.cov_Pi(d.camera_rotation)) for d, _ in self.groups]
+        self.last_t = None
+
+    def command(self, t, s, Theta):
+        """u_r (N, 3) for the detections s (N, 3, optical frame) exposed at t with the readings Theta (N, 3)."""
+        dt = None if self.last_t is None else t - self.last_t
+        self.last_t = t
+        P_est = _forward_by_group(self.groups, self.theta0 + Theta)
+        s_d = np.asarray(self.setup.s_d, dtype=float)
+        U = np.empty_like(s)
+        for (desc, idx), kf in zip(self.groups, self.filters):
+            R = np.asarray(desc.camera_rotation, dtype=float)
+            kf.update((P_est[idx] + s[idx] @ R.T).T, dt)
+            v_p = kf.velocity if self.setup.feedforward else np.zeros((3, len(idx)))
+            e_r = pbvs.relative_error(s[idx].T, R, s_d[:, None])
+            U[idx] = pbvs.cartesian_command(e_r, v_p, self.setup.K_p).T
+        return U
+
+
+class TrackerServo:
+    """One pbvs.Tracker per run (the object the pbvs_tracker node runs): the reference for BatchServo."""
+
+    def __init__(self, descs, setup):
+        self.trackers = [pbvs.Tracker(d, setup.K_p, setup.s_d, setup.max_speed, setup.kalman_q, setup.assumed_sigma,
+                                      setup.feedforward) for d in descs]
+
+    def command(self, t, s, Theta):
+        return np.array([tracker.update(t, s_i, Theta_i)[0] for tracker, s_i, Theta_i in zip(self.trackers, s, Theta)])
+
+
+ENGINES = {'batch': (BatchPlant, BatchServo), 'scalar': (ScalarPlant, TrackerServo)}
+
+
+class VisualLoop:
+    """The hand camera and a visual servo around a plant: one call per exposure.
+
+    An exposure measures every run's ball in the optical frame from the TRUE positions and mounting
+    plus the camera's bias and noise, and remembers the joints read at that tick; the detection is
+    served ``latency_frames`` exposures later: the servo's u_r (BatchServo or TrackerServo) goes to
+    the plant. Errors of the counted frames (after the warm-up) go to ``e_visual`` (|s - s_d|, the
+    measurement) and ``e_true`` (|s_true - s_d|), each (N, n_samples), m.
+    """
+
+    def __init__(self, plant, servo, balls, truth, setup, n_samples, rng):
+        self.plant, self.servo, self.balls, self.truth, self.setup, self.rng = plant, servo, balls, truth, setup, rng
         self.n_frames = setup.warmup_frames + n_samples
         self.e_visual, self.e_true = np.empty((len(balls), n_samples)), np.empty((len(balls), n_samples))
-        self.pending, self.frame, self.last_time = deque(), 0, None
+        self.pending, self.frame = deque(), 0
 
     def expose(self, t, Theta):
         """Take frame ``self.frame`` at time t; serve the one due. True once the last counted frame is served."""
         setup, s_d = self.setup, np.asarray(self.setup.s_d, dtype=float)
         B = np.array([b.at(t) for b in self.balls])
         s_true = (B - self.plant.effector() - self.truth.camera_translation) @ self.truth.camera_rotation
-        s = s_true + self.rng.normal(size=s_true.shape) * np.asarray(setup.sigma_camera)
-        self.pending.append((self.frame, t, s, _forward_by_group(self.groups, self.theta0 + Theta)))
+        s = s_true + np.asarray(setup.camera_bias) + self.rng.normal(size=s_true.shape) * np.asarray(setup.sigma_camera)
+        self.pending.append((self.frame, t, s, Theta))
         if setup.warmup_frames <= self.frame < self.n_frames:
             self.e_true[:, self.frame - setup.warmup_frames] = np.linalg.norm(s_true - s_d, axis=1)
         self.frame += 1
         return len(self.pending) > setup.latency_frames and self.serve(t)
 
     def serve(self, t):
-        """The oldest detection in: filters, eq. 23, command to the plant at time t."""
-        shown, t_shown, s, P_est = self.pending.popleft()
-        dt = None if self.last_time is None else t_shown - self.last_time
-        self.last_time = t_shown
-        U = np.empty_like(s)
-        for (desc, idx), kf in zip(self.groups, self.filters):
-            U[idx] = _visual_command(kf, s[idx], P_est[idx], desc.camera_rotation, dt, self.setup)
+        """The oldest detection in: the servo's command to the plant at time t."""
+        shown, t_shown, s, Theta = self.pending.popleft()
+        U = self.servo.command(t_shown, s, Theta)
         if shown >= self.setup.warmup_frames:
             self.e_visual[:, shown - self.setup.warmup_frames] = np.linalg.norm(s - self.setup.s_d, axis=1)
         self.plant.set_velocity(U, t)
         return shown == self.n_frames - 1
 
 
-def simulate(plant, descs, balls, truth, setup, n_samples, rng, progress=None):
+def simulate(plant, servo, balls, truth, setup, n_samples, rng, progress=None):
     """Run the visual servoing loop on ``plant`` until ``n_samples`` frames after the warm-up are served.
 
-    descs: the description each run's controller uses (the camera rotation R comes from it too);
-    balls: one object with ``at(t)`` per run; plant: ScalarPlant, BatchPlant or anything with their
-    methods. Each control tick: read the resolvers, expose a frame if one is due, control, step.
-    Returns (e_visual, e_true), each (N, n_samples) in m (see VisualLoop).
+    servo: BatchServo or TrackerServo of the descriptions the runs use; balls: one object with
+    ``at(t)`` per run; plant: ScalarPlant, BatchPlant or anything with their methods. Each control
+    tick: read the resolvers, expose a frame if one is due, control, step. Returns (e_visual,
+    e_true), each (N, n_samples) in m (see VisualLoop).
     """
-    loop = VisualLoop(plant, descs, balls, truth, setup, n_samples, rng)
+    loop = VisualLoop(plant, servo, balls, truth, setup, n_samples, rng)
     ticks = exposure_ticks(loop.n_frames + setup.latency_frames, setup)
     every = max(1, (loop.n_frames + 9) // 10)
     for k in range(ticks[-1] + 1):
@@ -367,15 +412,6 @@ def simulate(plant, descs, balls, truth, setup, n_samples, rng, progress=None):
         plant.control(t, Theta, dTheta)
         plant.step()
     return loop.e_visual, loop.e_true
-
-
-def _visual_command(kf, s, P_est, R, dt, setup):
-    """Detections s (n, 3) in, u_r (n, 3) out: the ball's filter on P_est + R s, then eq. 23 (m/s, base)."""
-    R = np.asarray(R, dtype=float)
-    kf.update((P_est + s @ R.T).T, dt)
-    v_p = kf.velocity if setup.feedforward else np.zeros((3, len(s)))
-    e_r = pbvs.relative_error(s.T, R, np.asarray(setup.s_d)[:, None])
-    return pbvs.cartesian_command(e_r, v_p, setup.K_p).T
 
 
 def kalman_gain(setup, W):
@@ -442,15 +478,16 @@ def closed_loop(setup, R, plant=None):
     e_k = C x_k (``plant``; default ``ideal_plant``, or the ``linearized_plant`` of the simulated
     robot). The camera measures y_k = e_k + w_k, w_k its noise in the base frame, covariance
     W = R diag(sigma^2) R^T. The ball is still, so only the noise moves its measured position, and the
-    filter at its steady gain K is f_k = A_f f_(k-1) - K w_k. The command u_k = -K_p y_k + v_k (eq. 23,
-    v_k the filter's velocity) drives the plant during frame k + L. State S_k = (x_k, f_(k-1),
-    u_(k-1) .. u_(k-L)). Returns (M, G, W, Ce) with e_k = Ce S_k.
+    filter at its steady gain K (for the noise it assumes, ``Setup.assumed_sigma``) is
+    f_k = A_f f_(k-1) - K w_k; a camera bias only shifts e's mean and is left out. The command
+    u_k = -K_p y_k + v_k (eq. 23, v_k the filter's velocity) drives the plant during frame k + L.
+    State S_k = (x_k, f_(k-1), u_(k-1) .. u_(k-L)). Returns (M, G, W, Ce) with e_k = Ce S_k.
     """
     A, B, C = plant if plant is not None else ideal_plant(setup)
     L, nx = setup.latency_frames, A.shape[0]
     R = np.asarray(R, dtype=float)
     W = R @ np.diag(np.square(setup.sigma_camera)) @ R.T
-    K, A_f = kalman_gain(setup, W)
+    K, A_f = kalman_gain(setup, R @ np.diag(np.square(setup.assumed_sigma)) @ R.T)
     V = np.hstack([np.zeros((3, 3)), np.eye(3)]) if setup.feedforward else np.zeros((3, 6))
     ns = nx + 6 + 3 * L
     f, pend = slice(nx, nx + 6), [slice(nx + 6 + 3 * j, nx + 9 + 3 * j) for j in range(L)]
@@ -571,7 +608,7 @@ def run_description(label, desc, truth, speeds, tests, samples, setup, seed, eng
     descs = [desc] * len(balls)
     rng = np.random.default_rng(seed)
     plant_rng, camera_rng = (np.random.default_rng(s) for s in rng.integers(2 ** 32, size=2))
-    Plant = {'batch': BatchPlant, 'scalar': ScalarPlant}[engine]
+    Plant, Servo = ENGINES[engine]
     plant = Plant(truth, descs, start_position(truth, setup, balls), setup, plant_rng)
     start = time.perf_counter()
 
@@ -580,7 +617,7 @@ def run_description(label, desc, truth, speeds, tests, samples, setup, seed, eng
             print(f'tracking [{label}]: {100 * fraction:3.0f} % ({time.perf_counter() - start:.0f} s)',
                   file=sys.stderr, flush=True)
 
-    e_visual, e_true = simulate(plant, descs, balls, truth, setup, length, camera_rng, report)
+    e_visual, e_true = simulate(plant, Servo(descs, setup), balls, truth, setup, length, camera_rng, report)
     shape = (len(speeds), tests, count * length)
     return (e_visual.reshape(shape)[..., :samples].mean(axis=2), e_true.reshape(shape)[..., :samples].mean(axis=2))
 

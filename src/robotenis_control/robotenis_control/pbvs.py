@@ -8,12 +8,22 @@ error of the robot's position relative to the ball is e_r = -R (s - s_d), and th
 
 drives it to zero while v_p, the ball's velocity from a Kalman filter on its measured positions,
 feeds the motion forward. J_R^-1 comes from the robot description in use (nominal or calibrated);
-the tracking error reported is |e_r|.
+the tracking error reported is |e_r|. ``Tracker`` puts the pieces together for one robot: what the
+pbvs_tracker node and the tracking study's reference engine both run.
 """
 import numpy as np
 
+from robotenis_kinematics import delta
+
 K_P = 16.8                                  # 1/s, the paper's gain
 S_DESIRED = np.array([0.0, 0.0, 0.600])     # m: ball centred in the image, 600 mm ahead
+MAX_SPEED = 2.5                             # m/s: u_r is clipped to this
+KALMAN_Q = 20.0                             # m^2/s^3: the ball's white acceleration (see BallKalman)
+# One detection's noise along the optical x, y, z (m). The paper's Table 2 gives single frames at
+# 200 mm (0.014, 0.038, 0.092 mm; Table 3 is for averages of 500 frames); at 600 mm the lateral noise
+# grows with the distance (x3) and the depth noise, from the apparent size, with its square (x9).
+SIGMA_CAMERA = (0.042e-3, 0.114e-3, 0.83e-3)
+LOST_S = 0.5                                # s without a detection: the ball is lost, its filter restarts
 
 
 def relative_error(s, R, s_desired=S_DESIRED):
@@ -24,6 +34,12 @@ def relative_error(s, R, s_desired=S_DESIRED):
 def cartesian_command(e_r, v_p, K_p=K_P):
     """u_r = -K_p e_r + v_p (eq. 23), m/s in the base frame."""
     return -K_p * np.asarray(e_r) + np.asarray(v_p)
+
+
+def clip_speed(u, max_speed):
+    """u scaled down to max_speed if it is faster (m/s)."""
+    speed = float(np.linalg.norm(u))
+    return u * (max_speed / speed) if speed > max_speed else u
 
 
 def joint_command(J_inv, u_r):
@@ -38,7 +54,7 @@ class BallKalman:
     (m^2/s^3): a chaotic ball that turns at 1.5 m/s needs q of order (a_max)^2 * tau.
     """
 
-    def __init__(self, q=20.0):
+    def __init__(self, q=KALMAN_Q):
         self.q = q
         self.x = None
         self.P = None
@@ -67,3 +83,47 @@ class BallKalman:
     @property
     def velocity(self):
         return np.zeros(3) if self.x is None else self.x[3:].copy()
+
+
+class Tracker:
+    """Eq. 23 for one robot, one detection at a time: the ball's filter, e_r and the command u_r.
+
+    desc: the robot description in use (forward kinematics and camera rotation R); K_p (1/s) and
+    s_desired (m, optical frame) are eq. 23's gain and reference; max_speed (m/s) clips u_r;
+    kalman_q is BallKalman's q; sigma_camera (m, optical x, y, z) one detection's noise, which the
+    filter sees in the base frame as R diag(sigma^2) R^T; feedforward=False drops v_p (the pure
+    proportional law); a gap of more than lost_after seconds between detections restarts the filter,
+    since its velocity is then stale.
+    """
+
+    def __init__(self, desc, K_p=K_P, s_desired=S_DESIRED, max_speed=MAX_SPEED, kalman_q=KALMAN_Q,
+                 sigma_camera=SIGMA_CAMERA, feedforward=True, lost_after=LOST_S):
+        self.desc, self.K_p, self.max_speed = desc, float(K_p), float(max_speed)
+        self.s_desired = np.asarray(s_desired, dtype=float)
+        self.q, self.feedforward, self.lost_after = float(kalman_q), bool(feedforward), float(lost_after)
+        R = desc.camera_rotation
+        self.cov = R @ np.diag(np.square(np.asarray(sigma_camera, dtype=float))) @ R.T
+        self.kalman, self.last_t = None, None
+
+    def update(self, t, s, Theta):
+        """Detection s (3,) in the optical frame (m), exposed at time t (s) while the resolvers read
+        Theta (rad, increments from home). Returns (u_r, e_r) in the base frame (m/s, m), or None if
+        t is not after the last detection's (a repeat, or out of order: the filter cannot go back)."""
+        if self.last_t is not None and t <= self.last_t:
+            return None
+        dt, self.last_t = (None if self.last_t is None else t - self.last_t), t
+        s = np.asarray(s, dtype=float)
+        v_p = self.ball_velocity(dt, s, Theta) if self.feedforward else np.zeros(3)
+        e_r = relative_error(s, self.desc.camera_rotation, self.s_desired)
+        return clip_speed(cartesian_command(e_r, v_p, self.K_p), self.max_speed), e_r
+
+    def ball_velocity(self, dt, s, Theta):
+        """v_p after fusing the ball's base-frame position P_est + R s, P_est = FK(theta0 + Theta),
+        measured dt seconds after the previous detection (None: the first)."""
+        if self.kalman is None or dt > self.lost_after:
+            self.kalman = BallKalman(self.q)
+        else:
+            self.kalman.predict(dt)
+        P_est = delta.forward(self.desc, self.desc.theta0 + np.asarray(Theta, dtype=float))
+        self.kalman.update(P_est + self.desc.camera_rotation @ s, self.cov)
+        return self.kalman.velocity

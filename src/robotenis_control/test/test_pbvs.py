@@ -1,7 +1,9 @@
 import numpy as np
+import pytest
 from scipy import stats
 
 from robotenis_control import pbvs
+from robotenis_kinematics import delta, description
 
 R_CAM = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])  # looking along base +x
 
@@ -53,3 +55,86 @@ def test_kalman_velocity_is_consistent_with_its_covariance():
 def test_joint_command_uses_the_inverse_jacobian():
     J_inv = np.diag([2.0, 3.0, 4.0])
     np.testing.assert_allclose(pbvs.joint_command(J_inv, [1.0, 1.0, 1.0]), [2.0, 3.0, 4.0])
+
+
+# ----------------------------------------------------------------------------------------------
+# Tracker: the filter, eq. 23 and the clipping for one robot, fed detections.
+
+FRAME = 1.0 / 120.0
+P_ROBOT = np.array([0.0, 0.0, 0.95])        # m: the robot at rest in the middle of the tracking region
+
+
+def seen(desc, ball, P):
+    """What the description's camera at the effector (the tests ignore its offset) sees: s = R^T (ball - P)."""
+    return desc.camera_rotation.T @ (np.asarray(ball) - P)
+
+
+def readings(desc, P):
+    return delta.inverse(desc, P) - desc.theta0
+
+
+def ball_path(desc, v, P=P_ROBOT):
+    """A ball flying at v (m/s, base frame) from the reference of a robot at P: position at time t."""
+    return lambda t: P + desc.camera_rotation @ pbvs.S_DESIRED + v * t
+
+
+def fly(tracker, ball, times, P=P_ROBOT):
+    """Detections of ``ball`` at ``times`` by a still robot at P; the last output of the tracker."""
+    for t in times:
+        out = tracker.update(t, seen(tracker.desc, ball(t), P), readings(tracker.desc, P))
+    return out
+
+
+def test_tracker_on_a_still_ball_commands_minus_kp_times_the_error():
+    desc = description.nominal()
+    s = pbvs.S_DESIRED + [0.01, -0.02, 0.03]
+    u_r, e_r = pbvs.Tracker(desc).update(1.0, s, readings(desc, P_ROBOT))
+    np.testing.assert_allclose(e_r, pbvs.relative_error(s, desc.camera_rotation), atol=1e-15)
+    np.testing.assert_allclose(u_r, -pbvs.K_P * e_r, atol=1e-15)
+
+
+def test_tracker_feeds_the_balls_velocity_forward_or_not():
+    """Noise-free positions of a constant-velocity ball: within 60 frames the filter's v_p is v to 1e-9
+    (its error decays geometrically); without feedforward the command is the proportional term only.
+    (max_speed high: the ball drifts 0.19 m, K_p e_r is 3 m/s.)"""
+    desc, v = description.nominal(), np.array([0.3, -0.2, 0.1])
+    u_r, e_r = fly(pbvs.Tracker(desc, max_speed=10.0), ball_path(desc, v), FRAME * np.arange(60))
+    np.testing.assert_allclose(u_r, -pbvs.K_P * e_r + v, atol=1e-9)
+    u_r, e_r = fly(pbvs.Tracker(desc, max_speed=10.0, feedforward=False), ball_path(desc, v), FRAME * np.arange(60))
+    np.testing.assert_allclose(u_r, -pbvs.K_P * e_r, atol=1e-15)
+
+
+def test_tracker_filters_the_ball_in_the_base_frame():
+    """The robot moves, the ball stays: s changes but P_est + R s does not, so v_p stays 0 (a filter
+    on s alone would see the ball move at minus the robot's speed)."""
+    desc = description.nominal()
+    ball = P_ROBOT + desc.camera_rotation @ pbvs.S_DESIRED
+    tracker = pbvs.Tracker(desc, max_speed=10.0)
+    for k in range(30):
+        P = P_ROBOT + np.array([0.0, 0.5, -0.3]) * k * FRAME
+        u_r, e_r = tracker.update(k * FRAME, seen(desc, ball, P), readings(desc, P))
+    np.testing.assert_allclose(u_r, -pbvs.K_P * e_r, atol=1e-9)
+    assert np.linalg.norm(e_r) > 0.05                      # the robot did move away from the reference
+
+
+def test_tracker_restarts_its_filter_after_losing_the_ball():
+    """The ball flies on out of sight: after a gap longer than lost_after the velocity is forgotten
+    (v_p = 0 on the next detection); after a shorter one the filter predicts across the gap, and on
+    a constant-velocity ball it lands exactly on the detection (v_p = v)."""
+    desc, v = description.nominal(), np.array([0.3, -0.2, 0.1])
+    for gap, v_expected in ((pbvs.LOST_S + 0.01, np.zeros(3)), (pbvs.LOST_S - 0.01, v)):
+        times = FRAME * np.arange(60)
+        u_r, e_r = fly(pbvs.Tracker(desc, max_speed=10.0), ball_path(desc, v), [*times, times[-1] + gap])
+        np.testing.assert_allclose(u_r + pbvs.K_P * e_r, v_expected, atol=1e-9)
+
+
+def test_tracker_clips_the_command_and_ignores_repeats():
+    desc = description.nominal()
+    tracker = pbvs.Tracker(desc, max_speed=1.0)
+    u_r, e_r = tracker.update(1.0, [0.0, 0.0, 1.6], readings(desc, P_ROBOT))   # a metre too far: 16.8 m/s asked
+    assert np.linalg.norm(u_r) == pytest.approx(1.0)
+    np.testing.assert_allclose(u_r / np.linalg.norm(u_r), -e_r / np.linalg.norm(e_r), atol=1e-15)
+    x = tracker.kalman.x.copy()
+    assert tracker.update(1.0, pbvs.S_DESIRED, readings(desc, P_ROBOT)) is None          # a repeat
+    assert tracker.update(1.0 - FRAME, pbvs.S_DESIRED, readings(desc, P_ROBOT)) is None  # out of order
+    np.testing.assert_array_equal(tracker.kalman.x, x)

@@ -66,7 +66,7 @@ def test_a_still_ball_off_the_reference_gives_minus_kp_times_the_error(node):
 def test_a_moving_ball_is_fed_forward(node):
     """The robot still, the ball moving at v (base frame) from the reference: after 60 frames the
     command is -K_p e_r + v_p with v_p = v (on noise-free positions of a constant-velocity ball the
-    filter's velocity is exact to rounding within 20 frames)."""
+    filter's velocity is exact to rounding within 20 frames); with feedforward off, -K_p e_r."""
     assert node.set_parameters([Parameter('max_speed', value=10.0)])[0].successful
     v = np.array([0.3, -0.2, 0.1])
     R = description.nominal().camera_rotation
@@ -79,6 +79,12 @@ def test_a_moving_ball_is_fed_forward(node):
     s = R.T @ (ball0 + v * 59 * FRAME - P)
     expected = pbvs.cartesian_command(pbvs.relative_error(s, R), v)
     np.testing.assert_allclose(node.pub.velocities()[-1], expected, atol=1e-9)
+    # feedforward off: the next detection is answered by the proportional term alone
+    assert node.set_parameters([Parameter('feedforward', value=False)])[0].successful
+    joints(node, 2.0 + 60 * FRAME)
+    s = R.T @ (ball0 + v * 60 * FRAME - P)
+    sphere(node, 2.0 + 60 * FRAME, s)
+    np.testing.assert_allclose(node.pub.velocities()[-1], -pbvs.K_P * pbvs.relative_error(s, R), atol=1e-12)
 
 
 def test_commands_are_clipped_and_bad_detections_ignored(node):
@@ -103,3 +109,30 @@ def test_parameters_apply_while_running_and_bad_ones_are_refused(node):
     joints(node, 1.0 + FRAME)
     sphere(node, 1.0 + FRAME, [0.0, 0.0, 0.6])
     assert len(node.pub.messages) == 1
+
+
+def test_a_detection_waits_for_the_joint_reading_of_its_exposure(node):
+    """The robot moving at 1 m/s along base z: readings at 1 ms. A detection handed over before the
+    reading of its exposure is held until that reading comes, and the ball is placed with it: with
+    the older reading the filter would see the ball 5 mm off and command its velocity."""
+    desc = description.nominal()
+    R, P0, v = desc.camera_rotation, np.array([0.0, 0.0, 0.9]), np.array([0.0, 0.0, 1.0])
+    ball = P0 + R @ pbvs.S_DESIRED
+    at = lambda t: delta.inverse(desc, P0 + v * (t - 1.0)) - desc.theta0  # noqa: E731
+    for k in range(6):
+        joints(node, 1.0 + 1e-3 * k, at(1.0 + 1e-3 * k))
+    sphere(node, 1.005, R.T @ (ball - P0 - v * 0.005))           # first detection: its reading is there
+    sphere(node, 1.010, R.T @ (ball - P0 - v * 0.010))           # its reading is not yet
+    assert len(node.pub.messages) == 1
+    for k in range(6, 11):
+        joints(node, 1.0 + 1e-3 * k, at(1.0 + 1e-3 * k))
+    assert len(node.pub.messages) == 2
+    # the still ball seen from the right place: no velocity, the command is the proportional term
+    e_r = pbvs.relative_error(R.T @ (ball - P0 - v * 0.010), R)
+    np.testing.assert_allclose(node.pub.velocities()[-1], -pbvs.K_P * e_r, atol=1e-9)
+    # switched off while a detection waits: its reading comes, and nothing is published
+    sphere(node, 1.015, R.T @ (ball - P0 - v * 0.015))
+    assert node.set_parameters([Parameter('enabled', value=False)])[0].successful
+    for k in range(11, 16):
+        joints(node, 1.0 + 1e-3 * k, at(1.0 + 1e-3 * k))
+    assert len(node.pub.messages) == 2
