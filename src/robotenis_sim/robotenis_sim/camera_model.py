@@ -300,6 +300,29 @@ def sphere_in_optical(P, ball, camera_rotation, camera_translation):
                                                          - np.asarray(camera_translation, dtype=float))
 
 
+class FrameClock:
+    """Which truth samples of the simulator the hand camera exposes: the first at or after each k / rate.
+
+    Samples come every few milliseconds (sim_motors' truth_decimation), so frames fall on them, 8 or
+    12 ms apart at 120 Hz with 4 ms samples, 120 per second on average. The hand camera ticking on
+    those samples and sim_motors' visual lockstep each keep one, and agree frame for frame.
+    """
+
+    TOLERANCE = 1e-6    # s: stamps travel in whole nanoseconds and times add up in floating point
+
+    def __init__(self, rate):
+        if not rate > 0:
+            raise ValueError(f'frame rate must be positive, got {rate}')
+        self.rate, self.next = float(rate), 0.0
+
+    def due(self, t):
+        """True if the sample at time t (s) is a frame; then the next deadline is the first after t."""
+        if t < self.next - self.TOLERANCE:
+            return False
+        self.next = (np.floor((t + self.TOLERANCE) * self.rate) + 1) / self.rate
+        return True
+
+
 def render_circles(camera, centres, normals, radii, rng, plate=230.0, ink=25.0, blur_sigma=0.8, noise_sigma=2.0):
     """A mono8 image of filled discs (an ISO 9283 plate of black circles) in the optical frame.
 

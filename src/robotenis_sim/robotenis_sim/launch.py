@@ -12,6 +12,8 @@ import sys
 import time
 from dataclasses import dataclass, field
 
+CAMERA_RATE = 120.0   # Hz: the hand camera (the paper's 8.34 ms frames)
+
 
 @dataclass
 class NodeSpec:
@@ -30,29 +32,40 @@ class NodeSpec:
         return args
 
 
-def default_nodes(truth_path, description_path, sim_time=False, calibration=True, extra=None):
-    """The simulated system: motors and hand camera (truth), detector, controller, calibration service.
+def default_nodes(truth_path, description_path, sim_time=False, calibration=True, extra=None, tracker=False):
+    """The simulated system: motors and hand camera (truth), detector, controller, calibration service,
+    and with ``tracker`` the visual servo (pbvs_tracker: keeps the ball centred through the controller's
+    velocity mode).
 
     Wall clock by default. With ``sim_time`` the simulator owns /clock and steps in lockstep with the
     controller (it waits for the command answering each reading), and every other node runs on
     /clock: a session takes as long as the CPU needs, and the 1 kHz loop keeps its 1 ms delay
     whatever the load. (Free-running at half speed was measured unstable here: the executor's timer
-    jitter made the simulator catch up in bursts of up to 10 ms with a stale command.) ``extra`` adds
-    or overrides parameters per node name.
+    jitter made the simulator catch up in bursts of up to 10 ms with a stale command.) With the
+    tracker on simulated time the visual loop is in lockstep too: the camera exposes on the
+    simulator's samples and the simulator waits for each frame's command for up to one frame period
+    (sim_motors' visual lockstep), else the loop's delay in simulated time would grow with the load.
+    ``extra`` adds or overrides parameters per node name.
     """
     clock = {'use_sim_time': 'true'} if sim_time else {}
     truth = {'truth_path': truth_path} if truth_path else {}
     desc = {'description_path': description_path}
     motors = {'publish_clock': 'true', 'lockstep': 'true', 'speed': '0.0', 'clock_decimation': '4'} if sim_time else {}
     ticks = {'tick_on_joint_states': 'true'} if sim_time else {}
+    camera = {}
+    if sim_time and tracker:
+        motors.update(camera_rate=str(CAMERA_RATE), visual_delay=str(1.0 / CAMERA_RATE))
+        camera.update(rate=str(CAMERA_RATE), tick_on_effector='true')
     nodes = [
         NodeSpec('sim_motors', 'robotenis_sim', 'sim_motors', {**truth, **motors}),
-        NodeSpec('hand_camera', 'robotenis_sim', 'hand_camera', {**truth, **clock}),
+        NodeSpec('hand_camera', 'robotenis_sim', 'hand_camera', {**truth, **clock, **camera}),
         NodeSpec('sphere_detector', 'robotenis_vision', 'sphere_detector', {**desc, **clock}),
         NodeSpec('motion_controller', 'robotenis_control', 'motion_controller', {**desc, **clock, **ticks}),
     ]
     if calibration:
         nodes.append(NodeSpec('calibration', 'robotenis_calibration', 'calibration', {**desc, **clock}))
+    if tracker:
+        nodes.append(NodeSpec('pbvs_tracker', 'robotenis_control', 'pbvs_tracker', {**desc, **clock}))
     for node in nodes:
         node.parameters.update((extra or {}).get(node.name, {}))
     return nodes
@@ -61,8 +74,9 @@ def default_nodes(truth_path, description_path, sim_time=False, calibration=True
 class Launcher:
     """Start, watch and stop a set of node processes."""
 
-    def __init__(self, nodes, prefix, log_dir, out=sys.stderr):
-        self.nodes, self.prefix, self.log_dir, self.out = nodes, prefix, log_dir, out
+    def __init__(self, nodes, prefix, log_dir, out=sys.stderr, env=None):
+        """env: the nodes' environment (default this process's), e.g. with a ROS_DOMAIN_ID of their own."""
+        self.nodes, self.prefix, self.log_dir, self.out, self.env = nodes, prefix, log_dir, out, env
         self.procs = {}
 
     def say(self, text):
@@ -77,7 +91,7 @@ class Launcher:
                 raise FileNotFoundError(f"node '{node.name}': {cmd[0]} is not installed (build the workspace)")
             log = open(os.path.join(self.log_dir, f'{node.name}.log'), 'w')
             # Own process group: a Ctrl-C in the terminal reaches the launcher, which stops nodes in order.
-            self.procs[node.name] = (subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
+            self.procs[node.name] = (subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=self.env,
                                                       start_new_session=True), log)
             self.say(f'started {node.name} (pid {self.procs[node.name][0].pid}), log {log.name}')
 

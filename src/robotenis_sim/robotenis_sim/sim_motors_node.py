@@ -18,13 +18,21 @@ Clock modes:
   answering the last reading, so a controller with use_sim_time and tick_on_joint_states runs
   exactly once per step at any speed. Every node on /clock pays for each clock message (about
   0.1 ms in rclpy): 250 Hz is enough for a 120 Hz camera and costs a quarter of 1 kHz.
+* visual lockstep (``camera_rate`` > 0, with lockstep): the hand camera (tick_on_effector, same
+  rate) exposes the first truth sample at or after each k / camera_rate. The simulator does not
+  step past an exposure plus ``visual_delay`` until a /cmd_vel_cartesian stamped with it (or later)
+  has arrived, waiting at most ``visual_timeout`` wall seconds: the visual loop (camera, detector,
+  tracker) then acts within visual_delay of simulated time whatever the load, as a real camera
+  pipeline acts within its frame. It waits only while the loop answers: after a frame without an
+  answer (ball lost, tracker off) it lets frames go by unwaited until the next answer.
 """
 import math
 import sys
 import time
+from collections import deque
 
 import numpy as np
-from geometry_msgs.msg import PointStamped
+from geometry_msgs.msg import PointStamped, TwistStamped
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.time import Time
@@ -35,7 +43,7 @@ from robotenis_control.dynamics import MassParameters
 from robotenis_kinematics import description
 from robotenis_kinematics.description import DescriptionError
 from robotenis_kinematics.ros import JOINTS, spin
-from robotenis_sim import motors, truth as sim_truth
+from robotenis_sim import camera_model, motors, truth as sim_truth
 from robotenis_sim.motors import true_masses
 
 
@@ -49,7 +57,9 @@ class SimMotorsNode(Node):
                               ('gear_ratio', motors.ResolverParameters.gear_ratio),
                               ('kv', motors.DriveParameters.K_V), ('torque_limit', motors.DriveParameters.torque_limit),
                               ('seed', -1), ('publish_clock', False), ('speed', 1.0), ('lockstep', False),
-                              ('lockstep_timeout', 0.1), ('truth_decimation', 4), ('clock_decimation', 1), ('max_catch_up', 10)):
+                              ('lockstep_timeout', 0.1), ('truth_decimation', 4), ('clock_decimation', 1),
+                              ('max_catch_up', 10), ('camera_rate', 0.0), ('visual_delay', 1.0 / 120.0),
+                              ('visual_timeout', 0.1)):
             self.declare_parameter(name, default)
         p = lambda name: self.get_parameter(name).value  # noqa: E731 - short accessor
         geometry, mass, joint_effects = self.load_truth(p('truth_path'), p('description_path'))
@@ -70,6 +80,14 @@ class SimMotorsNode(Node):
         self.truth_pub = self.create_publisher(PointStamped, '/sim/effector_position', 10)
         self.clock_pub = self.create_publisher(ClockMsg, '/clock', 10) if self.publish_clock else None
         self.create_subscription(JointState, '/motor_velocity_cmd', self.on_command, 10)
+        self.frames = None
+        if self.lockstep and float(p('camera_rate')) > 0:
+            self.frames = camera_model.FrameClock(float(p('camera_rate')))
+            self.visual_delay, self.visual_timeout = float(p('visual_delay')), float(p('visual_timeout'))
+            self.exposures = deque()         # stamps (s) of frames whose command has not arrived
+            self.visual_answers = False      # the visual loop answered its last frame
+            self.visual_since = None         # wall time the wait for a frame's command began
+            self.create_subscription(TwistStamped, '/cmd_vel_cartesian', self.on_visual_command, 10)
         self.steps = 0
         self.answered = True         # lockstep: the command for the last reading has arrived
         self.last_stamp = None
@@ -111,6 +129,30 @@ class SimMotorsNode(Node):
             self.answered = True
             self.on_timer()             # step at once: lockstep runs as fast as the two nodes can
 
+    def on_visual_command(self, msg):
+        t = Time.from_msg(msg.header.stamp).nanoseconds * 1e-9
+        while self.exposures and self.exposures[0] <= t + camera_model.FrameClock.TOLERANCE:
+            self.exposures.popleft()
+        self.visual_answers = True
+        if self.visual_since is not None:
+            self.on_timer()             # the step that waited for this command
+
+    def waiting_for_camera(self):
+        """Visual lockstep: True while the next step would pass a frame's deadline before its command."""
+        while self.exposures and self.sim.t + self.sim.dt >= self.exposures[0] + self.visual_delay - 1e-9:
+            if self.visual_answers:
+                now = time.monotonic()
+                self.visual_since = self.visual_since or now
+                if now - self.visual_since < self.visual_timeout:
+                    return True
+                self.get_logger().info('visual lockstep: a frame went unanswered, not waiting until the next answer',
+                                       throttle_duration_sec=5.0)
+            self.exposures.popleft()
+            self.visual_answers = False
+            self.visual_since = None
+        self.visual_since = None
+        return False
+
     def due_steps(self):
         """Steps to run now: as many as the wall clock (times speed) asks, at most max_catch_up."""
         if self.publish_clock and self.speed <= 0:
@@ -130,6 +172,8 @@ class SimMotorsNode(Node):
                     return
                 self.get_logger().warn('lockstep: no command for the last reading, stepping on', throttle_duration_sec=1.0)
             self.waiting_since = None
+            if self.frames is not None and self.waiting_for_camera():
+                return
         for _ in range(n):
             self.sim.step()
             self.steps += 1
@@ -147,6 +191,9 @@ class SimMotorsNode(Node):
         self.last_stamp, self.answered = stamp, False
         self.joint_pub.publish(msg)
         if self.steps % self.truth_decimation == 0:
+            t = Time.from_msg(stamp).nanoseconds * 1e-9
+            if self.frames is not None and self.frames.due(t):
+                self.exposures.append(t)
             P, _ = self.sim.effector()
             truth = PointStamped()
             truth.header.stamp, truth.header.frame_id = stamp, 'base'

@@ -114,3 +114,20 @@ def test_circles_cover_their_projected_area():
     assert abs(ink.sum() - area) / (2 * np.sqrt(np.pi * area)) < 0.005    # 1/200 px of "radius", as above
     with pytest.raises(ValueError, match='must agree'):
         cm.render_circles(CAM, [c], [n, n], [0.02], np.random.default_rng(0))
+
+
+def test_frame_clock_exposes_the_first_sample_after_each_deadline():
+    """4 ms samples (stamps rounded to ns as on the wire), 120 Hz: one frame per deadline k / 120, on
+    the first sample at or after it, so 120 frames per simulated second; a clock started late (a camera
+    joining after the simulator) picks the same samples from its first deadline on."""
+    samples = np.round(np.arange(0, 2000) * 0.004 * 1e9) * 1e-9
+    clock = cm.FrameClock(120.0)
+    frames = np.array([t for t in samples if clock.due(t)])
+    deadlines = np.arange(len(frames)) / 120.0
+    assert np.all(frames >= deadlines - 1e-9) and np.all(frames - deadlines < 0.004 - 1e-9)
+    assert len(frames) == int(np.floor(samples[-1] * 120)) + 1
+    late = cm.FrameClock(120.0)
+    late_frames = np.array([t for t in samples[501:] if late.due(t)])
+    np.testing.assert_array_equal(late_frames[1:], frames[frames > late_frames[0]])
+    with pytest.raises(ValueError, match='rate'):
+        cm.FrameClock(0.0)

@@ -80,3 +80,14 @@ def test_missing_node_is_named(prefix):
     launcher = Launcher([NodeSpec('x', 'pkg', 'nothere')], str(prefix / 'install'), str(prefix / 'log'), io.StringIO())
     with pytest.raises(FileNotFoundError, match="node 'x'.*not installed"):
         launcher.start()
+
+
+def test_the_tracker_on_simulated_time_puts_the_visual_loop_in_lockstep():
+    from robotenis_sim.launch import default_nodes
+    plain = {n.name: n.parameters for n in default_nodes('', '/d.yaml', sim_time=True, calibration=False)}
+    assert 'pbvs_tracker' not in plain and 'camera_rate' not in plain['sim_motors']
+    nodes = {n.name: n.parameters for n in default_nodes('', '/d.yaml', sim_time=True, calibration=False, tracker=True,
+                                                          extra={'pbvs_tracker': {'enabled': 'false'}})}
+    assert nodes['pbvs_tracker'] == {'description_path': '/d.yaml', 'use_sim_time': 'true', 'enabled': 'false'}
+    assert nodes['hand_camera']['tick_on_effector'] == 'true'
+    assert float(nodes['sim_motors']['camera_rate']) == float(nodes['hand_camera']['rate']) == 120.0

@@ -1,0 +1,63 @@
+"""sim_motors' visual lockstep, its callbacks called directly: the simulator waits for each frame's command."""
+import time
+
+import pytest
+import rclpy
+from geometry_msgs.msg import TwistStamped
+from sensor_msgs.msg import JointState
+
+from robotenis_kinematics.ros import JOINTS
+from robotenis_sim.sim_motors_node import SimMotorsNode
+
+DELAY, TIMEOUT = 1.0 / 120.0, 0.05
+
+
+@pytest.fixture
+def node():
+    rclpy.init(args=['--ros-args', '-p', 'publish_clock:=true', '-p', 'lockstep:=true', '-p', 'speed:=0.0',
+                     '-p', 'camera_rate:=120.0', '-p', f'visual_delay:={DELAY}', '-p', f'visual_timeout:={TIMEOUT}',
+                     '-p', 'seed:=1'])
+    n = SimMotorsNode()
+    try:
+        yield n
+    finally:
+        n.destroy_node()
+        rclpy.try_shutdown()
+
+
+def controller_answers(node, steps):
+    """Answer the last reading ``steps`` times (as the motion controller does); the simulated time after."""
+    for _ in range(steps):
+        msg = JointState(name=list(JOINTS), velocity=[0.0, 0.0, 0.0])
+        msg.header.stamp = node.last_stamp
+        node.on_command(msg)
+    return node.sim.t
+
+
+def visual_answer(node, t):
+    msg = TwistStamped()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = int(t), int(round((t % 1) * 1e9))
+    node.on_visual_command(msg)
+
+
+def test_the_simulator_waits_for_each_frames_command_while_the_loop_answers(node):
+    # nothing has answered yet: frames go by unwaited
+    assert controller_answers(node, 50) == pytest.approx(0.050)
+    visual_answer(node, node.exposures[-1])               # the loop answers its latest frame
+    while not node.exposures:
+        controller_answers(node, 1)
+    t_frame = node.exposures[0]                           # the next frame, not answered yet
+    t = controller_answers(node, 50)
+    assert t < t_frame + DELAY <= t + node.sim.dt + 1e-9  # stopped at the step before its deadline
+    visual_answer(node, t_frame)                          # its command comes: the simulator goes on
+    assert controller_answers(node, 1) > t
+
+
+def test_an_unanswered_frame_is_given_up_after_the_timeout_and_then_not_waited_for(node):
+    controller_answers(node, 50)
+    visual_answer(node, node.exposures[-1])
+    t = controller_answers(node, 50)                      # waiting for the next frame's command
+    time.sleep(1.5 * TIMEOUT)
+    node.on_timer()                                       # the timer notices the timeout
+    assert node.sim.t > t and not node.visual_answers
+    assert controller_answers(node, 50) == pytest.approx(t + node.sim.dt + 0.050)  # no more waiting
