@@ -13,7 +13,8 @@ pbvs_tracker node and the tracking study's reference engine both run.
 """
 import numpy as np
 
-from robotenis_kinematics import delta
+from robotenis_control.controller import JOINT_EFFECTS, MOVING
+from robotenis_kinematics import delta, effects
 
 K_P = 16.8                                  # 1/s, the paper's gain
 S_DESIRED = np.array([0.0, 0.0, 0.600])     # m: ball centred in the image, 600 mm ahead
@@ -104,6 +105,8 @@ class Tracker:
         R = desc.camera_rotation
         self.cov = R @ np.diag(np.square(np.asarray(sigma_camera, dtype=float))) @ R.T
         self.kalman, self.last_t = None, None
+        self.joint_fx = {k: v for k, v in effects.parameters(desc).items() if k in JOINT_EFFECTS}
+        self.direction, self.last_Theta = np.ones(3), None
 
     def update(self, t, s, Theta):
         """Detection s (3,) in the optical frame (m), exposed at time t (s) while the resolvers read
@@ -118,12 +121,29 @@ class Tracker:
         return clip_speed(cartesian_command(e_r, v_p, self.K_p), self.max_speed), e_r
 
     def ball_velocity(self, dt, s, Theta):
-        """v_p after fusing the ball's base-frame position P_est + R s, P_est = FK(theta0 + Theta),
-        measured dt seconds after the previous detection (None: the first)."""
+        """v_p after fusing the ball's base-frame position P_est + R s (``effector``), measured dt
+        seconds after the previous detection (None: the first)."""
         if self.kalman is None or dt > self.lost_after:
             self.kalman = BallKalman(self.q)
         else:
             self.kalman.predict(dt)
-        P_est = delta.forward(self.desc, self.desc.theta0 + np.asarray(Theta, dtype=float))
-        self.kalman.update(P_est + self.desc.camera_rotation @ s, self.cov)
+        self.kalman.update(self.effector(dt, Theta) + self.desc.camera_rotation @ s, self.cov)
         return self.kalman.velocity
+
+    def effector(self, dt, Theta):
+        """P_est: forward kinematics of the arm angles the description gives for the readings Theta,
+        with its joint effects (a calibrated model's gear scale, backlash, sag) as the motion
+        controller applies them; each joint's motion direction from the readings since the last
+        detection (dt seconds ago)."""
+        Theta = np.asarray(Theta, dtype=float)
+        base = self.desc.theta0 + Theta
+        if not self.joint_fx:
+            return delta.forward(self.desc, base)
+        if self.last_Theta is not None and dt:
+            step = Theta - self.last_Theta
+            self.direction = np.where(np.abs(step) > MOVING * dt, np.sign(step), self.direction)
+        self.last_Theta = Theta
+        P = delta.forward(self.desc, base)
+        theta = effects.model_joint_angles(self.desc, self.joint_fx, Theta[None], self.direction[None], P[None],
+                                           effects.gravity_load(self.desc))[0][0]
+        return delta.forward(self.desc, theta)

@@ -4,6 +4,7 @@ from scipy import stats
 
 from robotenis_control import pbvs
 from robotenis_kinematics import delta, description
+from robotenis_kinematics import effects as fx
 
 R_CAM = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])  # looking along base +x
 
@@ -115,6 +116,26 @@ def test_tracker_filters_the_ball_in_the_base_frame():
         u_r, e_r = tracker.update(k * FRAME, seen(desc, ball, P), readings(desc, P))
     np.testing.assert_allclose(u_r, -pbvs.K_P * e_r, atol=1e-9)
     assert np.linalg.norm(e_r) > 0.05                      # the robot did move away from the reference
+
+
+def test_tracker_places_the_ball_with_the_calibrated_joint_effects():
+    """A calibrated description with a gear scale and a backlash: the robot moves, the ball stays.
+    Through the effects (readings from effects.increments_for, their inverse) P_est + R s stays put,
+    v_p = 0; the same readings taken as plain theta0 + Theta make the still ball seem to move at
+    about k times the robot's speed."""
+    effects = [{'name': 'joint_scale', 'scale': [5e-3, -4e-3, 4e-3]}, {'name': 'backlash', 'width': [1e-3, 6e-4, 8e-4]}]
+    desc = description.nominal().copy(effects=effects)
+    ball = P_ROBOT + desc.camera_rotation @ pbvs.S_DESIRED
+    with_effects, plain = pbvs.Tracker(desc, max_speed=10.0), pbvs.Tracker(description.nominal(), max_speed=10.0)
+    velocity = np.array([0.0, 0.5, -0.3])
+    for k in range(30):
+        P = P_ROBOT + velocity * k * FRAME
+        theta = delta.inverse(desc, P)
+        Theta = fx.increments_for(desc, theta, np.sign(theta - delta.inverse(desc, P - velocity * FRAME)), P)
+        outputs = [t.update(k * FRAME, seen(desc, ball, P), Theta) for t in (with_effects, plain)]
+    (u_r, e_r), (u_plain, e_plain) = outputs
+    np.testing.assert_allclose(u_r, -pbvs.K_P * e_r, atol=1e-9)
+    assert np.linalg.norm(u_plain + pbvs.K_P * e_plain) > 1e-3          # 4e-3 of 0.58 m/s, at least
 
 
 def test_tracker_restarts_its_filter_after_losing_the_ball():
