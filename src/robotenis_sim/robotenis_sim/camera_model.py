@@ -184,6 +184,10 @@ def _sphere_box(camera, C, R, margin=2):
     u1, v1 = min(hi[0], camera.width), min(hi[1], camera.height)
     if u0 >= u1 or v0 >= v1:
         return None
+    # a ball just past the border leaves a box one pixel thick: grown inward to two, since the
+    # outline's distance takes differences across the box
+    u0, v0 = min(u0, max(u1 - 2, 0)), min(v0, max(v1 - 2, 0))
+    u1, v1 = max(u1, min(u0 + 2, camera.width)), max(v1, min(v0 + 2, camera.height))
     return u0, u1, v0, v1
 
 

@@ -131,3 +131,16 @@ def test_frame_clock_exposes_the_first_sample_after_each_deadline():
     np.testing.assert_array_equal(late_frames[1:], frames[frames > late_frames[0]])
     with pytest.raises(ValueError, match='rate'):
         cm.FrameClock(0.0)
+
+
+def test_a_ball_just_past_the_border_renders():
+    """Its box is clipped to a pixel or two at the image's edge (a hand camera at the end of a session
+    looked there): every position of the ball's rim from 20 px outside (in ideal pixels: the lens
+    moves the image's edge by several) to 3 px inside renders."""
+    rng = np.random.default_rng(0)
+    z = 0.3
+    r_px = CAM.fx * R / z
+    for rim in np.arange(-20.0, 3.0, 0.25):              # u of the rim's rightmost point, and v of its lowest
+        u = rim - r_px
+        for C in ([(u - CAM.cx) * z / CAM.fx, 0.0, z], [0.0, (u - CAM.cy) * z / CAM.fy, z]):
+            assert cm.render(CAM, C, R, rng, noise_sigma=0.0).shape == (CAM.height, CAM.width)
