@@ -1,8 +1,10 @@
 """The `calibration` node: the Calibrate service that runs a session and calibrates from its bag.
 
-A request plans the poses (robotenis_calibration.poses), then the session runner commands each one on
-/goal, waits for rest and settling, and counts detections, while every message of the session is
-recorded to a rosbag2 bag (MCAP, robotenis_calibration.bag_io): the declared description, joint states,
+A request plans the poses (robotenis_calibration.poses) around the parameter ``sphere_guess`` (the
+user's rough ball position), then the session runner commands each one on /goal, waits for rest and
+settling, and counts detections (with ``replan``, the default, the poses after the first six rests
+are planned again around the ball those rests saw), while every message of the session is recorded
+to a rosbag2 bag (MCAP, robotenis_calibration.bag_io): the declared description, joint states,
 sphere positions and detections, camera info, goals, rest markers, progress, and of the camera images
 only the first ``images_per_pose`` frames of each rest, as lossless PNG (sensor_msgs/CompressedImage on
 ``image_topic``/compressed): enough to check or re-run the detector on every pose, at a small share
@@ -45,6 +47,7 @@ class CalibrationNode(Node):
         super().__init__('calibration')
         self.declare_parameter('description_path', description.config_path('nominal.yaml'))
         self.declare_parameter('sphere_guess', [0.73, -0.02, 1.37])
+        self.declare_parameter('replan', True)
         self.declare_parameter('bags_dir', 'bags')
         self.declare_parameter('results_dir', 'bags')
         self.declare_parameter('num_poses', 300)
@@ -201,7 +204,21 @@ class CalibrationNode(Node):
         self.get_logger().info(f'session: {len(planned)} poses ({request.pose_selection or "boundary"}), '
                                f'{config.frames_per_pose} frames each, recording {bag}')
         self.finished = Future()
-        self.runner = SessionRunner(planned, config)
+
+        def replan(rests, n):
+            guess = poses.refined_guess(declared, [np.mean(r.Theta, axis=0) for r in rests],
+                                        [np.mean(r.sphere, axis=0) for r in rests])
+            moved = np.linalg.norm(guess - self.get_parameter('sphere_guess').value)
+            try:
+                again = poses.select(request.pose_selection or 'boundary', declared, guess, n, rng)
+            except ValueError as e:
+                self.get_logger().warn(f'ball guess refined from {len(rests)} rests, but {e}: the plan is kept')
+                return None
+            self.get_logger().info(f'ball guess refined from {len(rests)} rests (moved {moved * 1e3:.0f} mm): '
+                                   f'the last {n} poses planned again')
+            return again
+
+        self.runner = SessionRunner(planned, config, replan if self.get_parameter('replan').value else None)
         self.runner.start(self.now())
         await self.finished
         skipped = list(self.runner.skipped)

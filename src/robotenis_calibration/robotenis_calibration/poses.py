@@ -3,6 +3,8 @@
 The planner knows only what a real system knows: the declared description and a rough guess of where
 the ball is (base frame, a few cm). It predicts the ball in the camera with the declared camera
 rotation and no camera offset, so it keeps wide margins; rests that still miss the ball are skipped.
+Once a few rests are measured, ``refined_guess`` puts the ball where they saw it, and the session
+plans the rest of its poses with that (SessionRunner's ``replan``).
 
 * ``boundary``: the paper's way -- random poses 5-10 cm from a singularity (section 5.1).
 * ``optimal``: a D-optimal design: from visible candidates, greedily add the pose that most increases
@@ -11,7 +13,7 @@ rotation and no camera offset, so it keeps wide margins; rests that still miss t
 """
 import numpy as np
 
-from robotenis_kinematics import synthetic, workspace
+from robotenis_kinematics import delta, effects, synthetic, workspace
 from robotenis_kinematics import identification as idf
 
 PLAN_RANGE = (0.20, 0.55)      # m along the optical axis: inside the detector's 0.15-0.60
@@ -22,6 +24,15 @@ SELECTIONS = ('boundary', 'optimal')
 def predicted_sphere(declared, sphere_guess, P):
     """Where the ball should appear in the optical frame (K, 3) for effector positions P."""
     return (np.asarray(sphere_guess, dtype=float) - P) @ declared.camera_rotation
+
+
+def refined_guess(declared, Theta, sphere):
+    """The ball guess (base frame, m, as ``predicted_sphere`` takes it) from measured rests: the median
+    over rests of P_k + R s_k, with P_k the declared model's effector for the readings Theta (K, 3,
+    increments, in visit order) and s_k the ball seen (K, 3, optical frame). Good to the declared
+    model's error (about a millimetre) plus the camera offset the planner ignores anyway."""
+    P = delta.forward(declared, effects.joint_angles(declared, Theta))
+    return np.median(P + np.asarray(sphere, dtype=float) @ declared.camera_rotation.T, axis=0)
 
 
 def plannable(declared, sphere_guess, P):

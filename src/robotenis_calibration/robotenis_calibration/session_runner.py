@@ -3,7 +3,9 @@
 For each planned pose, in order: command it, wait until the joints are still, wait the settle time
 (vibrations of the robot and the ball's holder), then average resolver readings and sphere
 detections until enough frames are in; a pose whose ball is not seen within a time-out is skipped
-with the reason. The calibration node feeds it messages and executes the actions it returns.
+with the reason. After ``replan_after`` measured rests the poses still to come may be replaced
+(``replan``: the ball is then known from those rests, not from the user's rough guess). The
+calibration node feeds it messages and executes the actions it returns.
 """
 from collections import deque
 from dataclasses import dataclass, field
@@ -42,9 +44,12 @@ class RunnerConfig:
 class SessionRunner:
     """Drives one session; ``actions`` lists what the node must do, ``rests`` what was measured."""
 
-    def __init__(self, poses, config=RunnerConfig()):
+    def __init__(self, poses, config=RunnerConfig(), replan=None, replan_after=6):
+        """replan(rests, n): n poses (n, 3) to visit instead of the n still planned, or None to keep
+        them; called once, when ``replan_after`` rests are measured."""
         self.poses = np.asarray(poses, dtype=float)
         self.config = config
+        self.replan, self.replan_after = replan, replan_after
         self.index = -1
         self.state = MOVING
         self.rests, self.skipped = [], []
@@ -125,6 +130,11 @@ class SessionRunner:
         self._rest.end = t
         self.rests.append(self._rest)
         self.actions.append(('rest_end', self.index))
+        remaining = len(self.poses) - self.index - 1
+        if self.replan is not None and len(self.rests) == self.replan_after and remaining > 0:
+            poses = self.replan(self.rests, remaining)
+            if poses is not None:
+                self.poses = np.concatenate([self.poses[:self.index + 1], np.asarray(poses, dtype=float)])
         self._next_pose(t)
 
     def take_actions(self):

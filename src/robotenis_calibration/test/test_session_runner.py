@@ -67,3 +67,29 @@ def test_a_ball_out_of_view_costs_only_the_no_ball_time():
     ends = {a[1]: t for t, a in actions if a[0] == 'rest_end'}
     assert abs(ends[0] - starts[0] - config.no_ball_time) < 0.01
     assert [r.index for r in runner.rests] == [1]
+
+
+def test_the_poses_after_the_first_rests_are_planned_again():
+    """replan is asked once, after replan_after measured rests, for the poses still to come; the goals
+    commanded from then on are its poses, and the session keeps its length."""
+    poses = np.array([[0.1 * k, 0, 1.0] for k in range(1, 6)])
+    asked = []
+
+    def replan(rests, n):
+        asked.append(([r.index for r in rests], n))
+        return np.full((n, 3), 7.0)
+
+    runner = SessionRunner(poses, RunnerConfig(frames_per_pose=5, settle_time=0.1), replan, replan_after=2)
+    actions = drive(runner, lambda k: True)
+    assert asked == [([0, 1], 3)]
+    goals = [a[1] for _, a in actions if a[0] == 'goal']
+    np.testing.assert_array_equal(goals[:2], poses[:2])
+    np.testing.assert_array_equal(goals[2:], np.full((3, 3), 7.0))
+    assert len(runner.rests) == 5
+
+
+def test_a_replan_that_keeps_the_plan():
+    poses = np.array([[0.1 * k, 0, 1.0] for k in range(1, 4)])
+    runner = SessionRunner(poses, RunnerConfig(frames_per_pose=5, settle_time=0.1), lambda rests, n: None, 1)
+    actions = drive(runner, lambda k: True)
+    np.testing.assert_array_equal([a[1] for _, a in actions if a[0] == 'goal'], poses)
