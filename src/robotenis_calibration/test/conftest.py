@@ -1,4 +1,5 @@
 import os
+import random
 
 import pytest
 
@@ -15,3 +16,26 @@ def table1():
     """Table 1's calibrated column (the kinematics package's test geometry)."""
     here = os.path.dirname(os.path.abspath(__file__))
     return description.load(os.path.join(here, '..', '..', 'robotenis_kinematics', 'test', 'table1_calibrated.yaml'))
+
+
+@pytest.fixture
+def console_script():
+    """The installed path of this package's console script ``name``; the test is skipped when the
+    workspace is not built."""
+    top = os.path.abspath(os.path.join(os.path.dirname(os.path.realpath(__file__)), '..', '..', '..'))
+
+    def path(name):
+        exe = os.path.join(top, 'install', 'robotenis_calibration', 'lib', 'robotenis_calibration', name)
+        if not os.path.exists(exe):
+            pytest.skip(f'{exe} is not installed (./robotenis setup)')
+        return exe
+    return path
+
+
+@pytest.fixture
+def ros_env(monkeypatch):
+    """A ROS domain of the test's own (random id, localhost only) for this process's rclpy and for the
+    node processes it starts: the environment to start them with."""
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(random.randint(1, 200)))
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    return dict(os.environ)

@@ -4,8 +4,6 @@ No simulator runs, so a session never gets past its first pose; what is checked 
 need one: a bad request is answered with what went wrong, a second request while a session runs is
 refused with "busy", and Ctrl-C during a session leaves a whole, readable bag.
 """
-import os
-import random
 import signal
 import subprocess
 import time
@@ -17,23 +15,12 @@ from rclpy.executors import SingleThreadedExecutor
 from robotenis_calibration import bag_io
 from robotenis_interfaces.srv import Calibrate
 
-TOP = os.path.abspath(os.path.join(os.path.dirname(os.path.realpath(__file__)), '..', '..', '..'))
-
-
-def executable():
-    path = os.path.join(TOP, 'install', 'robotenis_calibration', 'lib', 'robotenis_calibration', 'calibration')
-    if not os.path.exists(path):
-        pytest.skip(f'{path} is not installed (./robotenis setup)')
-    return path
-
 
 @pytest.fixture
-def service(tmp_path):
-    env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(1, 200)), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
-    os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')})
+def service(tmp_path, console_script, ros_env):
     log = open(tmp_path / 'node.log', 'w')
-    proc = subprocess.Popen([executable(), '--ros-args', '-p', f'bags_dir:={tmp_path}', '-p', 'num_poses:=30'],
-                            env=env, stdout=log, stderr=subprocess.STDOUT)
+    args = ['--ros-args', '-p', f'bags_dir:={tmp_path}', '-p', 'num_poses:=30']
+    proc = subprocess.Popen([console_script('calibration'), *args], env=ros_env, stdout=log, stderr=subprocess.STDOUT)
     rclpy.init()
     node = rclpy.create_node('calibration_probe')
     executor = SingleThreadedExecutor()

@@ -4,8 +4,6 @@ A probe node in this process subscribes before the replay starts (the replay wai
 discovery); the reliable /sphere/position must arrive complete and in order, the latched
 /robot_description once, and the images (sensor-data QoS, best effort) at all.
 """
-import os
-import random
 import signal
 import subprocess
 import time
@@ -20,27 +18,17 @@ from std_msgs.msg import String
 
 from robotenis_calibration import bag_io, bag_sim
 
-TOP = os.path.abspath(os.path.join(os.path.dirname(os.path.realpath(__file__)), '..', '..', '..'))
 RATE = 4.0
 
 
-def executable():
-    path = os.path.join(TOP, 'install', 'robotenis_calibration', 'lib', 'robotenis_calibration', 'replay')
-    if not os.path.exists(path):
-        pytest.skip(f'{path} is not installed (./robotenis setup)')
-    return path
-
-
 @pytest.fixture
-def probe():
-    env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(1, 200)), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
-    os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')})
+def probe(ros_env):
     rclpy.init()
     node = rclpy.create_node('replay_probe')
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     try:
-        yield node, executor, env
+        yield node, executor, ros_env
     finally:
         executor.shutdown()
         node.destroy_node()
@@ -55,7 +43,7 @@ def spin_while(executor, proc, timeout):
         executor.spin_once(timeout_sec=0.01)
 
 
-def test_replay_publishes_the_bag(tmp_path, probe):
+def test_replay_publishes_the_bag(tmp_path, probe, console_script):
     node, executor, env = probe
     bag = bag_sim.write(tmp_path / 'bag', bag_sim.BagSpec(poses=10, images_per_pose=1))
     with bag_io.BagReader(bag.path) as reader:
@@ -70,7 +58,7 @@ def test_replay_publishes_the_bag(tmp_path, probe):
                              QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
     node.create_subscription(CompressedImage, '/camera/image_raw/compressed', images.append, qos_profile_sensor_data)
     log = open(tmp_path / 'replay.log', 'w')
-    proc = subprocess.Popen([executable(), bag.path, '--rate', str(RATE), '--delay', '2'], env=env,
+    proc = subprocess.Popen([console_script('replay'), bag.path, '--rate', str(RATE), '--delay', '2'], env=env,
                             stdout=log, stderr=subprocess.STDOUT)
     spin_while(executor, proc, 60.0)
     log.close()
@@ -82,10 +70,10 @@ def test_replay_publishes_the_bag(tmp_path, probe):
     assert got[-1][1] - got[0][1] > span / RATE * 0.99
 
 
-def test_replay_stops_cleanly_on_ctrl_c(tmp_path, probe):
+def test_replay_stops_cleanly_on_ctrl_c(tmp_path, probe, console_script):
     _, _, env = probe
     bag = bag_sim.write(tmp_path / 'bag', bag_sim.BagSpec(poses=10))
-    proc = subprocess.Popen([executable(), bag.path, '--delay', '0.5'], env=env,
+    proc = subprocess.Popen([console_script('replay'), bag.path, '--delay', '0.5'], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     time.sleep(3.0)
     assert proc.poll() is None, proc.communicate()[0]
