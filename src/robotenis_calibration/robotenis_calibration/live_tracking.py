@@ -31,6 +31,7 @@ import numpy as np
 from robotenis_calibration import tracking_study as ts
 from robotenis_control import pbvs
 from robotenis_kinematics import description
+from robotenis_kinematics.ros import stamp_seconds
 from robotenis_sim import launch
 from robotenis_sim import truth as sim_truth
 
@@ -39,10 +40,6 @@ GOAL_S = 0.6             # s to reach the region's centre: 0.19 m from home take
 WALL_TIMEOUT_S = 60.0    # s of wall time for the nodes to start or for simulated time to advance at all
 LATE_S = 0.05            # s (simulated) to wait past a window for the detections of its last frames
 QOS_DEPTH = 200          # the probe keeps up with 250 Hz truth; a deep queue rides out a busy moment
-
-
-def seconds(stamp):
-    return stamp.sec + stamp.nanosec * 1e-9
 
 
 @dataclass
@@ -93,18 +90,19 @@ class Probe:
         self.effector = {}                                            # stamp ns -> P
         self.now = -np.inf                                            # latest truth stamp: simulated time
         vector = lambda m: np.array([m.point.x, m.point.y, m.point.z])  # noqa: E731
-        node.create_subscription(PointStamped, '/sphere/position',
-                                 lambda m: self.detections.append((seconds(m.header.stamp), vector(m))), QOS_DEPTH)
-        node.create_subscription(PointStamped, '/sim/ball_position',
-                                 lambda m: self.balls.append((seconds(m.header.stamp), vector(m))), QOS_DEPTH)
+        stamped = lambda m: (stamp_seconds(m.header.stamp), vector(m))  # noqa: E731
+        node.create_subscription(PointStamped, '/sphere/position', lambda m: self.detections.append(stamped(m)),
+                                 QOS_DEPTH)
+        node.create_subscription(PointStamped, '/sim/ball_position', lambda m: self.balls.append(stamped(m)),
+                                 QOS_DEPTH)
         node.create_subscription(PointStamped, '/sim/effector_position', self.on_effector, QOS_DEPTH)
         node.create_subscription(TwistStamped, '/cmd_vel_cartesian',
-                                 lambda m: self.commands.append((seconds(m.header.stamp), self.now)), QOS_DEPTH)
+                                 lambda m: self.commands.append((stamp_seconds(m.header.stamp), self.now)), QOS_DEPTH)
 
     def on_effector(self, msg):
         self.effector[msg.header.stamp.sec * 10 ** 9 + msg.header.stamp.nanosec] = \
             np.array([msg.point.x, msg.point.y, msg.point.z])
-        self.now = max(self.now, seconds(msg.header.stamp))
+        self.now = max(self.now, stamp_seconds(msg.header.stamp))
 
     def s_true(self, t, B):
         """The ball in the TRUE camera at the effector sample of stamp t, or None if it was not received."""

@@ -17,7 +17,6 @@ import sys
 import numpy as np
 from geometry_msgs.msg import PointStamped, TwistStamped
 from rclpy.node import Node
-from rclpy.time import Time
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from rcl_interfaces.msg import SetParametersResult
 from sensor_msgs.msg import JointState
@@ -27,7 +26,7 @@ from std_srvs.srv import Trigger
 from robotenis_control import controller as ctl
 from robotenis_kinematics import description
 from robotenis_kinematics.description import DescriptionError
-from robotenis_kinematics.ros import JOINTS, joint_vector, spin
+from robotenis_kinematics.ros import JOINTS, joint_vector, spin, stamp_seconds
 
 GAIN_PARAMETERS = ('kp', 'kd', 'kv')
 STALE_READING_S = 0.05   # no joint reading for this long: command zero speed (the drives then brake)
@@ -120,7 +119,7 @@ class MotionControllerNode(Node):
         dTheta = joint_vector(msg, 'velocity')
         if self.tick_on_joint_states:
             # lockstep: the reading's stamp is the time, so /clock arriving late cannot skew it
-            self.reading = (Theta, dTheta, Time.from_msg(msg.header.stamp).nanoseconds * 1e-9)
+            self.reading = (Theta, dTheta, stamp_seconds(msg.header.stamp))
             self.tick(msg.header.stamp)
         else:
             self.reading = (Theta, dTheta, self.now())

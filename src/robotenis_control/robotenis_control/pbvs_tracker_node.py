@@ -25,22 +25,17 @@ import numpy as np
 from geometry_msgs.msg import PointStamped, TwistStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
-from rclpy.time import Time
 from sensor_msgs.msg import JointState
 
 from robotenis_control import pbvs
 from robotenis_kinematics import description
 from robotenis_kinematics.description import DescriptionError
-from robotenis_kinematics.ros import joint_vector, spin
+from robotenis_kinematics.ros import joint_vector, spin, stamp_seconds
 
 READING_MATCH_S = 0.02   # a detection needs a joint reading this close to its exposure
 HISTORY = 200            # joint readings kept (0.2 s at 1 kHz)
 WAITING = 10             # detections kept while their joint reading is on its way (more: readings stopped)
 STAMP_TOLERANCE = 1e-6   # s: stamps travel in whole nanoseconds
-
-
-def stamp_seconds(stamp):
-    return Time.from_msg(stamp).nanoseconds * 1e-9
 
 
 class PbvsTrackerNode(Node):

@@ -1,4 +1,5 @@
-"""What every RoboTenis node shares: the joint names, reading them from a JointState, and spinning.
+"""What every RoboTenis node shares: the joint names, reading them from a JointState, stamps in
+seconds, and spinning.
 
 The only module of this package that touches ROS; the mathematics never imports it.
 """
@@ -19,6 +20,11 @@ def joint_vector(msg, field):
     if any(j not in index for j in JOINTS):
         return None
     return np.array([values[index[j]] for j in JOINTS], dtype=float)
+
+
+def stamp_seconds(stamp):
+    """A builtin_interfaces/Time (a header stamp) in seconds, as rclpy.time.Time(...).nanoseconds * 1e-9."""
+    return (stamp.sec * 1_000_000_000 + stamp.nanosec) * 1e-9
 
 
 def spin(make_node, name, fatal=(ValueError,), args=None, finish=None):

@@ -25,11 +25,10 @@ import numpy as np
 from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
-from rclpy.time import Time
 from sensor_msgs.msg import CameraInfo, Image
 
 from robotenis_kinematics.description import DescriptionError
-from robotenis_kinematics.ros import spin
+from robotenis_kinematics.ros import spin, stamp_seconds
 from robotenis_sim import ball as sim_ball, camera_model, truth as sim_truth
 from robotenis_vision import camera as vision_camera
 
@@ -98,7 +97,7 @@ class HandCameraNode(Node):
 
     def on_effector(self, msg):
         self.effector = (np.array([msg.point.x, msg.point.y, msg.point.z]), msg.header.stamp)
-        if self.frames is not None and self.frames.due(Time.from_msg(msg.header.stamp).nanoseconds * 1e-9):
+        if self.frames is not None and self.frames.due(stamp_seconds(msg.header.stamp)):
             self.render_frame()
 
     def render_frame(self):
@@ -107,7 +106,7 @@ class HandCameraNode(Node):
             self.get_logger().warn('no /sim/effector_position yet: not rendering', throttle_duration_sec=5.0)
             return
         P, stamp = self.effector
-        t = Time.from_msg(stamp).nanoseconds * 1e-9
+        t = stamp_seconds(stamp)
         B = self.ball.at(t)
         C = camera_model.sphere_in_optical(P, B, self.truth.camera_rotation, self.truth.camera_translation)
         image = camera_model.render(self.camera, C, self.truth.geometry.sphere_radius, self.rng,

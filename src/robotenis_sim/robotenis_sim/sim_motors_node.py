@@ -42,7 +42,7 @@ from sensor_msgs.msg import JointState
 from robotenis_control.dynamics import MassParameters
 from robotenis_kinematics import description
 from robotenis_kinematics.description import DescriptionError
-from robotenis_kinematics.ros import JOINTS, spin
+from robotenis_kinematics.ros import JOINTS, spin, stamp_seconds
 from robotenis_sim import camera_model, motors, truth as sim_truth
 from robotenis_sim.motors import true_masses
 
@@ -130,7 +130,7 @@ class SimMotorsNode(Node):
             self.on_timer()             # step at once: lockstep runs as fast as the two nodes can
 
     def on_visual_command(self, msg):
-        t = Time.from_msg(msg.header.stamp).nanoseconds * 1e-9
+        t = stamp_seconds(msg.header.stamp)
         while self.exposures and self.exposures[0] <= t + camera_model.FrameClock.TOLERANCE:
             self.exposures.popleft()
         self.visual_answers = True
@@ -191,7 +191,7 @@ class SimMotorsNode(Node):
         self.last_stamp, self.answered = stamp, False
         self.joint_pub.publish(msg)
         if self.steps % self.truth_decimation == 0:
-            t = Time.from_msg(stamp).nanoseconds * 1e-9
+            t = stamp_seconds(stamp)
             if self.frames is not None and self.frames.due(t):
                 self.exposures.append(t)
             P, _ = self.sim.effector()
