@@ -60,7 +60,7 @@ def main():
     if '--ros' not in sys.argv:
         print('whole simulated session through ROS: run with --ros (several minutes)')
         return
-    from robotenis_calibration import demo
+    from robotenis_validation import demo
     t = time.perf_counter()
     status = demo.main(sys.argv[sys.argv.index('--ros') + 1:])
     elapsed = time.perf_counter() - t

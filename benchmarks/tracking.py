@@ -1,12 +1,12 @@
 """Benchmark: the tracking tests of section 6.2.2 (Table 5) in simulation, and a baseline.
 
-Runs robotenis_calibration.tracking_study (10 tests of 5,000 camera samples per maximum ball speed,
+Runs robotenis_validation.tracking_study (10 tests of 5,000 camera samples per maximum ball speed,
 nominal against calibrated description; ``--quick``: 2 tests of 1,000) and prints Table 5's layout
 with our numbers beside the paper's. Baseline, same process: the same law without the Kalman velocity
 feedforward v_p (pure proportional u_r = -K_p e_r), on 2 tests of 1,000 samples (``--full-baseline``:
 as many as the study). Also prints how fast the simulation ran (robot-seconds per wall second).
 
-``--ros``: the same tests through the ROS nodes instead (robotenis_calibration.live_tracking: the
+``--ros``: the same tests through the ROS nodes instead (robotenis_validation.live_tracking: the
 nodes as processes on simulated time, ``--seconds`` counted per speed, default 0.5 and 1.5 m/s),
 each beside what tracking_study predicts for that speed, ball and description, computed in this
 process: with Table 2's detection noise, and with the live detector's bias and noise. About 3.5 wall
@@ -15,12 +15,13 @@ seconds per simulated second on 2 cores, plus 20 s per speed for the study (the 
 import argparse
 import sys
 
-from robotenis_calibration import tracking_study as ts
+from robotenis_validation import tracking_study as ts
+from robotenis_validation import tracking_setup as tsetup
 
 
 def robot_seconds(table):
     """Simulated robot time behind a table (s): every run, segment and warm-up included."""
-    count, length = ts.segments(table.samples, table.setup)
+    count, length = tsetup.segments(table.samples, table.setup)
     frames = table.setup.warmup_frames + length + table.setup.latency_frames + 1
     return len(table.labels) * len(table.speeds) * table.tests * count * frames * table.setup.frame_period
 
@@ -40,12 +41,12 @@ def main(argv=None):
     parser.add_argument('--seconds', type=float, default=20.0, help='with --ros: simulated seconds counted per speed')
     args = parser.parse_args(argv)
     if args.ros:
-        from robotenis_calibration import live_tracking
+        from robotenis_validation import live_tracking
         print('\n'.join(live_tracking.report(args.speeds, args.seconds)))
         return 0
     study = ts.run(quick=args.quick)
-    size = {} if args.full_baseline else {'tests': ts.QUICK_TESTS, 'samples': ts.QUICK_SAMPLES}
-    baseline = ts.run(quick=args.quick, setup=ts.Setup(feedforward=False), **size)
+    size = {} if args.full_baseline else {'tests': tsetup.QUICK_TESTS, 'samples': tsetup.QUICK_SAMPLES}
+    baseline = ts.run(quick=args.quick, setup=tsetup.Setup(feedforward=False), **size)
     print('\n'.join(ts.table_lines(study)))
     print()
     print('baseline, same process: pure proportional u_r = -K_p e_r (no v_p)')

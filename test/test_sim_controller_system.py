@@ -6,6 +6,8 @@ machine is. The simulator's true geometry and masses are the controller's (nomin
 what remains at rest is the resolution of the loop: the readings are quantised (one count q =
 2 pi / (16384 * 10) rad) with 2e-5 rad noise, the controller holds the joints within a few counts,
 and the effector within |J|_2 * 4 q of the goal (|J|_2 < 1.3 m/rad at these goals: 0.2 mm).
+The pair runs in the root namespace and in a namespace of its own (two robots on one graph): the
+nodes' names are relative, so only /clock stays global.
 """
 import os
 import random
@@ -20,7 +22,10 @@ from geometry_msgs.msg import PointStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
+from builtin_interfaces.msg import Time as TimeMsg
 from robotenis_kinematics import delta, description
+from robotenis_ros.convert import point_stamped
+from robotenis_ros.names import BASE_FRAME
 from robotenis_sim import motors
 
 TOP = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -50,16 +55,19 @@ def stop(procs, timeout=10.0):
     return [p.returncode for p in procs]
 
 
-@pytest.fixture
-def system(tmp_path):
+@pytest.fixture(params=['', 'robot1'])
+def system(tmp_path, request):
     env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(1, 200)), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')})
     nominal = description.config_path('nominal.yaml')
+    ns = ['-r', f'__ns:=/{request.param}'] if request.param else []
     commands = [
-        [executable('robotenis_sim', 'sim_motors'), '--ros-args', '-p', f'description_path:={nominal}',
-         '-p', 'publish_clock:=true', '-p', 'lockstep:=true', '-p', 'speed:=0.0', '-p', 'seed:=3'],
-        [executable('robotenis_control', 'motion_controller'), '--ros-args', '-p', f'description_path:={nominal}',
-         '-p', 'use_sim_time:=true', '-p', 'tick_on_joint_states:=true'],
+        [executable('robotenis_sim', 'sim_motors'), '--ros-args', *ns,
+         '-p', f'description_path:={nominal}', '-p', 'publish_clock:=true', '-p', 'lockstep:=true',
+         '-p', 'speed:=0.0', '-p', 'seed:=3'],
+        [executable('robotenis_control', 'motion_controller'), '--ros-args', *ns,
+         '-p', f'description_path:={nominal}', '-p', 'use_sim_time:=true',
+         '-p', 'tick_on_joint_states:=true'],
     ]
     logs = [open(tmp_path / f'node{k}.log', 'w') for k in range(2)]
     procs = [subprocess.Popen(c, env=env, stdout=log, stderr=subprocess.STDOUT) for c, log in zip(commands, logs)]
@@ -68,7 +76,7 @@ def system(tmp_path):
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     try:
-        yield node, executor, procs
+        yield node, executor, procs, '/' + request.param if request.param else ''
     finally:
         codes = stop(procs)
         executor.shutdown()
@@ -80,12 +88,12 @@ def system(tmp_path):
 
 
 def test_three_goals_reached_within_the_loop_resolution(system):
-    node, executor, procs = system
+    node, executor, procs, ns = system
     truth = []
-    node.create_subscription(PointStamped, '/sim/effector_position',
+    node.create_subscription(PointStamped, f'{ns}/sim/effector_position',
                              lambda m: truth.append((m.header.stamp.sec + m.header.stamp.nanosec * 1e-9,
                                                      m.point.x, m.point.y, m.point.z)), 10)
-    goal_pub = node.create_publisher(PointStamped, '/goal', 10)
+    goal_pub = node.create_publisher(PointStamped, f'{ns}/goal', 10)
 
     def spin_until(predicate, wall_timeout):
         deadline = time.monotonic() + wall_timeout
@@ -94,14 +102,12 @@ def test_three_goals_reached_within_the_loop_resolution(system):
             assert all(p.poll() is None for p in procs), 'a node died'
         return predicate()
 
-    assert spin_until(lambda: len(truth) > 10 and node.count_subscribers('/goal') > 0, 20.0), 'no simulator output'
+    assert spin_until(lambda: len(truth) > 10 and node.count_subscribers(f'{ns}/goal') > 0, 20.0), \
+        'no simulator output'
     desc = description.nominal()
     q = motors.ResolverParameters().resolution
     for goal in GOALS:
-        msg = PointStamped()
-        msg.header.frame_id = 'base'
-        msg.point.x, msg.point.y, msg.point.z = (float(v) for v in goal)
-        goal_pub.publish(msg)
+        goal_pub.publish(point_stamped(goal, TimeMsg(), BASE_FRAME))
         start = truth[-1][0]
         assert spin_until(lambda: truth[-1][0] > start + SIM_SECONDS_PER_GOAL, 15.0), 'simulated time stalled'
         P = np.array(truth[-1][1:])

@@ -2,7 +2,7 @@
 
 sim_motors, hand_camera (the ball at up to 1.5 m/s, Table 5's fastest), sphere_detector,
 motion_controller and pbvs_tracker run as processes on simulated time, the simulator in lockstep
-with the controller and with the visual loop (robotenis_calibration.live_tracking). 3 s of tracking
+with the controller and with the visual loop (robotenis_validation.live_tracking). 3 s of tracking
 are scored against the truth, then the tracker is switched off.
 
 Why the bound. Without the velocity feedforward v_p, eq. 23 is a first-order loop of gain K_p: on a
@@ -14,7 +14,7 @@ delays (about 1 mm in the offline study without camera noise), and what the dete
 - its bias b (s - s_true, measured in the same run): the robot centres the MEASURED ball, so b goes
   into the true error one to one (about 1.6-2 mm in depth at 600 mm);
 - its noise sigma (measured likewise), which the loop passes to the robot: the RMS true error it
-  causes on a still ball is tracking_study.noise_response's, with the filter assuming Table 2's
+  causes on a still ball is tlinear.noise_response's, with the filter assuming Table 2's
   noise as the node does (RMS >= mean, so this over-counts).
 
 The test asserts mean true error < |b| + noise RMS + v_mean / (4 K_p): the feedforward must remove
@@ -27,8 +27,9 @@ import random
 import numpy as np
 import pytest
 
-from robotenis_calibration import live_tracking
-from robotenis_calibration import tracking_study as ts
+from robotenis_validation import live_tracking
+from robotenis_validation import tracking_linear as tlinear
+from robotenis_validation import tracking_setup as tsetup
 from robotenis_control import pbvs
 from robotenis_kinematics import description
 
@@ -68,8 +69,8 @@ def test_the_feedforward_removes_most_of_the_lag(runs):
     on, _, _ = runs
     lag = np.mean(on.ball_speed) / pbvs.K_P
     bias = np.linalg.norm(np.mean(on.detector, axis=0))
-    setup = ts.Setup(sigma_camera=tuple(np.std(on.detector, axis=0)), filter_sigma=pbvs.SIGMA_CAMERA)
-    noise_ms, _ = ts.noise_response(setup, description.nominal().camera_rotation, len(on.true))
+    setup = tsetup.Setup(sigma_camera=tuple(np.std(on.detector, axis=0)), filter_sigma=pbvs.SIGMA_CAMERA)
+    noise_ms, _ = tlinear.noise_response(setup, description.nominal().camera_rotation, len(on.true))
     bound = bias + np.sqrt(noise_ms) + lag / 4
     assert np.mean(on.true) < bound, (f'mean true error {1e3 * np.mean(on.true):.2f} mm >= {1e3 * bound:.2f} mm '
                                       f'(bias {1e3 * bias:.2f}, noise RMS {1e3 * np.sqrt(noise_ms):.2f}, '

@@ -1,5 +1,3 @@
-from glob import glob
-
 from setuptools import find_packages, setup
 
 package_name = 'robotenis_calibration'
@@ -11,7 +9,6 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
-        ('share/' + package_name + '/config', glob('config/*.yaml')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,
@@ -23,8 +20,6 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
-            'demo = robotenis_calibration.demo:main',
-            'report = robotenis_calibration.report:main',
             'calibrate = robotenis_calibration.calibrate_cli:main',
             'replay = robotenis_calibration.replay:main',
             'calibration = robotenis_calibration.calibration_node:main',

@@ -23,7 +23,6 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={
         'console_scripts': [
-            'launch = robotenis_sim.launch:main',
             'sim_motors = robotenis_sim.sim_motors_node:main',
             'hand_camera = robotenis_sim.hand_camera_node:main',
         ],

@@ -5,7 +5,7 @@
         /calibration/rest markers, or found from the joint states; S: seconds skipped at the start of
         each rest found that way, default 0.5)
     ./robotenis calibrate --call [--poses N] [--frames N] [--settle S] [--seed N]
-                                 [--selection boundary|optimal] [--bag PATH]
+                                 [--selection boundary|optimal] [--bag PATH] [--namespace NS]
         calls the calibration service of a running system (0 or absent: the service's defaults)
 """
 import argparse
@@ -51,6 +51,7 @@ def main(argv=None):
     parser.add_argument('--frames', type=int, default=0)
     parser.add_argument('--selection', default='boundary', choices=('boundary', 'optimal'))
     parser.add_argument('--bag', default='', help='bag path for the recorded session (with --call)')
+    parser.add_argument('--namespace', default='', help="the system's namespace (with --call)")
     args = parser.parse_args(argv)
     if args.call:
         from robotenis_calibration import service_client

@@ -1,81 +1,104 @@
-"""The `calibration` node: the Calibrate service that runs a session and calibrates from its bag.
+"""
+The `calibration` node: the Calibrate service that runs a session and calibrates from its bag.
 
 A request plans the poses (robotenis_calibration.poses) around the parameter ``sphere_guess`` (the
-user's rough ball position), then the session runner commands each one on /goal, waits for rest and
-settling, and counts detections (with ``replan``, the default, the poses after the first six rests
-are planned again around the ball those rests saw), while every message of the session is recorded
-to a rosbag2 bag (MCAP, robotenis_calibration.bag_io): the declared description, joint states,
-sphere positions and detections, camera info, goals, rest markers, progress, and of the camera images
-only the first ``images_per_pose`` frames of each rest, as lossless PNG (sensor_msgs/CompressedImage on
-``image_topic``/compressed): enough to check or re-run the detector on every pose, at a small share
-of the bag (all frames raw would be 300 kB each at 120 Hz). When the session is over the bag is
-calibrated exactly as `./robotenis calibrate BAG --out RESULT.yaml` would do it
+user's rough ball position: required, it is the robot's), then the session runner commands each
+one on goal, waits for rest and settling, and counts detections (with ``replan``, the default, the
+poses after the first six rests are planned again around the ball those rests saw), while every
+message of the session is recorded to a rosbag2 bag (MCAP, robotenis_calibration.bag_io): the
+declared description, joint states, sphere positions and detections, camera info, goals, rest
+markers, progress, and of the camera images only the first ``images_per_pose`` frames of each rest,
+as lossless PNG (sensor_msgs/CompressedImage on ``image_topic``/compressed): enough to check or
+re-run the detector on every pose, at a small share of the bag (all frames raw would be 300 kB
+each at 120 Hz). The bag names the topics as the calibration contract does (/joint_states,
+/sphere/position, /robot_description, ...) whatever the node's namespace. When the session is
+over the bag is calibrated exactly as `./robotenis calibrate BAG --out RESULT.yaml` would do it
 (robotenis_calibration.pipeline). A second request while a session runs is refused with "busy";
-progress goes to /calibration/progress. On shutdown a bag being recorded is closed, so it stays whole.
+progress goes to calibration/progress. On shutdown a bag being recorded is closed, so it stays
+whole. Parameters: the table PARAMETERS.
 """
 import array
+import math
 import os
 import time
 
-import numpy as np
 from geometry_msgs.msg import PointStamped
+import numpy as np
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
+from rclpy.qos import qos_profile_sensor_data
 from rclpy.serialization import serialize_message
 from rclpy.task import Future
-from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
-from std_msgs.msg import String
-
 from robotenis_calibration import bag_io, pipeline, poses
 from robotenis_calibration.session_runner import DONE, MEASURING, RunnerConfig, SessionRunner
 from robotenis_interfaces.msg import CalibrationProgress, RestMarker, SphereDetection
 from robotenis_interfaces.srv import Calibrate
 from robotenis_kinematics import description
-from robotenis_kinematics.ros import joint_vector, spin
+from robotenis_ros.convert import image_array, joint_vector, point_stamped, xyz
+from robotenis_ros.names import BASE_FRAME
+from robotenis_ros.node import declare_parameters, LATCHED, spin
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
+from std_msgs.msg import String
 
-RECORDED = {  # topic -> (message class, ROS type name)
-    '/joint_states': (JointState, 'sensor_msgs/msg/JointState'),
-    '/sphere/position': (PointStamped, 'geometry_msgs/msg/PointStamped'),
-    '/sphere/detection': (SphereDetection, 'robotenis_interfaces/msg/SphereDetection'),
-    '/camera/camera_info': (CameraInfo, 'sensor_msgs/msg/CameraInfo'),
+RECORDED = {  # topic (relative) -> (message class, ROS type name)
+    'joint_states': (JointState, 'sensor_msgs/msg/JointState'),
+    'sphere/position': (PointStamped, 'geometry_msgs/msg/PointStamped'),
+    'sphere/detection': (SphereDetection, 'robotenis_interfaces/msg/SphereDetection'),
+    'camera/camera_info': (CameraInfo, 'sensor_msgs/msg/CameraInfo'),
+}
+PUBLISHED = {
+    'goal': 'geometry_msgs/msg/PointStamped',
+    'calibration/rest': 'robotenis_interfaces/msg/RestMarker',
+    'calibration/progress': 'robotenis_interfaces/msg/CalibrationProgress',
+    'robot_description': 'std_msgs/msg/String',
+}
+UNSET = [math.nan] * 3
+PARAMETERS = {
+    'description_path': (description.config_path('nominal.yaml'),
+                         'the robot description the session starts from'),
+    'sphere_guess': (UNSET, "m, base frame: the ball's rough position (a few cm); required"),
+    'replan': (True, 'plan the poses again around the ball the first six rests saw'),
+    'bags_dir': ('bags', 'folder of the recorded sessions'),
+    'results_dir': ('bags', 'folder of the calibration results'),
+    'num_poses': (300, 'poses of a session (a request may ask for others)'),
+    'frames_per_pose': (500, 'detections averaged per rest'),
+    'settle_time': (4.0, 's waited at rest before measuring (the paper\'s 4 s)'),
+    'holdout_fraction': (0.3, 'share of the rests held out to test the calibration'),
+    'detector_floor': ([5e-4, 3e-3], "the detector's systematic error (lateral, depth) as "
+                                     'fractions of the range: pipeline.with_detector_floor'),
+    'image_topic': ('camera/image_raw', 'the images whose first frames of each rest are kept'),
+    'images_per_pose': (2, 'images kept per rest, as PNG'),
 }
 
 
+def bag_topic(name):
+    """The contract's name of a topic in the bag: the node's relative name from the root."""
+    return '/' + name.lstrip('/')
+
+
 class CalibrationNode(Node):
+
     def __init__(self):
         super().__init__('calibration')
-        self.declare_parameter('description_path', description.config_path('nominal.yaml'))
-        self.declare_parameter('sphere_guess', [0.73, -0.02, 1.37])
-        self.declare_parameter('replan', True)
-        self.declare_parameter('bags_dir', 'bags')
-        self.declare_parameter('results_dir', 'bags')
-        self.declare_parameter('num_poses', 300)
-        self.declare_parameter('frames_per_pose', 500)
-        self.declare_parameter('settle_time', 4.0)
-        self.declare_parameter('holdout_fraction', 0.3)
-        # the sphere_detector's systematic error (lateral, depth) as fractions of the range: pipeline.with_detector_floor
-        self.declare_parameter('detector_floor', [5e-4, 3e-3])
-        self.declare_parameter('image_topic', '/camera/image_raw')
-        self.declare_parameter('images_per_pose', 2)
+        self.image_topic = declare_parameters(self, PARAMETERS)['image_topic']
         self.busy = False
         self.runner = None
         self.writer = None
         self.finished = None
         self.images_kept = {}           # pose index -> images recorded during its rest
-        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.goal_pub = self.create_publisher(PointStamped, '/goal', 10)
-        self.progress_pub = self.create_publisher(CalibrationProgress, '/calibration/progress', 10)
-        self.rest_pub = self.create_publisher(RestMarker, '/calibration/rest', 10)
-        self.description_pub = self.create_publisher(String, '/robot_description', latched)
+        self.goal_pub = self.create_publisher(PointStamped, 'goal', 10)
+        self.progress_pub = self.create_publisher(CalibrationProgress, 'calibration/progress', 10)
+        self.rest_pub = self.create_publisher(RestMarker, 'calibration/rest', 10)
+        self.description_pub = self.create_publisher(String, 'robot_description', LATCHED)
         for topic, (cls, _) in RECORDED.items():
-            qos = qos_profile_sensor_data if topic.startswith('/camera') else 50
+            qos = qos_profile_sensor_data if topic.startswith('camera') else 50
             self.create_subscription(cls, topic, lambda msg, t=topic: self.on_message(t, msg), qos)
-        self.image_topic = self.get_parameter('image_topic').value
         self.create_subscription(Image, self.image_topic, self.on_image, qos_profile_sensor_data)
-        # The service awaits the whole session: in its own reentrant group, so that the timer and the
-        # subscriptions (default group) run meanwhile and a second request can be answered "busy".
-        self.create_service(Calibrate, '/calibrate', self.on_calibrate, callback_group=ReentrantCallbackGroup())
+        # The service awaits the whole session: in its own reentrant group, so that the timer and
+        # the subscriptions (default group) run meanwhile and a second request can be answered
+        # "busy".
+        self.create_service(Calibrate, 'calibrate', self.on_calibrate,
+                            callback_group=ReentrantCallbackGroup())
         self.create_timer(0.01, self.on_timer)
 
     def now(self):
@@ -83,20 +106,20 @@ class CalibrationNode(Node):
 
     def record(self, topic, msg):
         if self.writer is not None:
-            self.writer.write(topic, self.get_clock().now().nanoseconds, serialize_message(msg))
+            self.writer.write(bag_topic(topic), self.get_clock().now().nanoseconds,
+                              serialize_message(msg))
 
     def on_message(self, topic, msg):
         self.record(topic, msg)
         if self.runner is None:
             return
         t = self.now()
-        if topic == '/joint_states':
+        if topic == 'joint_states':
             Theta = joint_vector(msg, 'position')
             if Theta is not None:
                 self.runner.joint_state(t, Theta)
-        elif topic == '/sphere/detection':
-            p = msg.position
-            self.runner.detection(t, np.array([p.x, p.y, p.z]), np.reshape(msg.covariance, (3, 3)))
+        elif topic == 'sphere/detection':
+            self.runner.detection(t, xyz(msg.position), np.reshape(msg.covariance, (3, 3)))
 
     def on_image(self, msg):
         """Record the first images_per_pose mono8 frames of each rest as PNG."""
@@ -105,11 +128,12 @@ class CalibrationNode(Node):
         index = self.runner.index
         if self.images_kept.get(index, 0) >= self.get_parameter('images_per_pose').value:
             return
-        if msg.encoding != 'mono8':
-            self.get_logger().warn(f'{self.image_topic}: {msg.encoding} images are not recorded (mono8 only)',
+        try:
+            pixels = image_array(msg)
+        except ValueError as e:
+            self.get_logger().warn(f'{self.image_topic}: not recorded ({e})',
                                    throttle_duration_sec=60.0)
             return
-        pixels = np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(msg.height, msg.step)[:, :msg.width]
         self.record(self.image_topic + '/compressed',
                     CompressedImage(header=msg.header, format=bag_io.PNG_FORMAT,
                                     data=array.array('B', bag_io.png(pixels))))
@@ -125,16 +149,14 @@ class CalibrationNode(Node):
     def execute(self, kind, value):
         stamp = self.get_clock().now().to_msg()
         if kind == 'goal':
-            goal = PointStamped()
-            goal.header.stamp, goal.header.frame_id = stamp, 'base'
-            goal.point.x, goal.point.y, goal.point.z = (float(v) for v in value)
+            goal = point_stamped(value, stamp, BASE_FRAME)
             self.goal_pub.publish(goal)
-            self.record('/goal', goal)
+            self.record('goal', goal)
         elif kind in ('rest_start', 'rest_end'):
             marker = RestMarker(pose_index=int(value), start=(kind == 'rest_start'))
             marker.header.stamp = stamp
             self.rest_pub.publish(marker)
-            self.record('/calibration/rest', marker)
+            self.record('calibration/rest', marker)
         elif kind == 'progress':
             stage, index, count = value
             self.publish_progress(stage, index, count, self.runner.fraction)
@@ -146,21 +168,20 @@ class CalibrationNode(Node):
                                   fraction=float(fraction), message=message)
         msg.header.stamp = self.get_clock().now().to_msg()
         self.progress_pub.publish(msg)
-        self.record('/calibration/progress', msg)
+        self.record('calibration/progress', msg)
 
     def open_bag(self, path, declared_text):
         self.writer = bag_io.BagWriter(path)
         for topic, (_, type_name) in RECORDED.items():
-            self.writer.add_topic(topic, type_name)
-        self.writer.add_topic('/goal', 'geometry_msgs/msg/PointStamped')
-        self.writer.add_topic('/calibration/rest', 'robotenis_interfaces/msg/RestMarker')
-        self.writer.add_topic('/calibration/progress', 'robotenis_interfaces/msg/CalibrationProgress')
-        self.writer.add_topic('/robot_description', 'std_msgs/msg/String')
-        self.writer.add_topic(self.image_topic + '/compressed', 'sensor_msgs/msg/CompressedImage')
+            self.writer.add_topic(bag_topic(topic), type_name)
+        for topic, type_name in PUBLISHED.items():
+            self.writer.add_topic(bag_topic(topic), type_name)
+        self.writer.add_topic(bag_topic(self.image_topic + '/compressed'),
+                              'sensor_msgs/msg/CompressedImage')
         self.images_kept = {}
         text = String(data=declared_text)
         self.description_pub.publish(text)
-        self.record('/robot_description', text)
+        self.record('robot_description', text)
 
     def param(self, name, requested):
         return requested if requested else self.get_parameter(name).value
@@ -188,15 +209,18 @@ class CalibrationNode(Node):
             self.writer = None
 
     async def run_session(self, request, response):
-        path = self.get_parameter('description_path').value
-        declared = description.load(path)
+        guess = np.asarray(self.get_parameter('sphere_guess').value, dtype=float)
+        if guess.shape != (3,) or not np.all(np.isfinite(guess)):
+            raise ValueError('the parameter sphere_guess (the ball\'s rough position, base frame, '
+                             f'm) is not set: got {guess.tolist()}; give it in the launch '
+                             'configuration (robotenis_bringup/config/calibration.params.yaml)')
+        declared = description.load(self.get_parameter('description_path').value)
         n = self.param('num_poses', request.num_poses)
         config = RunnerConfig(frames_per_pose=self.param('frames_per_pose', request.frames_per_pose),
                               settle_time=request.settle_time if request.settle_time > 0
                               else self.get_parameter('settle_time').value)
         rng = np.random.default_rng(request.seed)
-        planned = poses.select(request.pose_selection or 'boundary', declared,
-                               self.get_parameter('sphere_guess').value, n, rng)
+        planned = poses.select(request.pose_selection or 'boundary', declared, guess, n, rng)
         stamp = time.strftime('%Y%m%d-%H%M%S')
         bag = request.bag_path or os.path.join(self.get_parameter('bags_dir').value, f'session-{stamp}')
         result_path = os.path.join(self.get_parameter('results_dir').value, f'calibration-{stamp}.yaml')
@@ -206,11 +230,12 @@ class CalibrationNode(Node):
         self.finished = Future()
 
         def replan(rests, n):
-            guess = poses.refined_guess(declared, [np.mean(r.Theta, axis=0) for r in rests],
-                                        [np.mean(r.sphere, axis=0) for r in rests])
-            moved = np.linalg.norm(guess - self.get_parameter('sphere_guess').value)
+            refined = poses.refined_guess(declared, [np.mean(r.Theta, axis=0) for r in rests],
+                                          [np.mean(r.sphere, axis=0) for r in rests])
+            moved = np.linalg.norm(refined - guess)
             try:
-                again = poses.select(request.pose_selection or 'boundary', declared, guess, n, rng)
+                again = poses.select(request.pose_selection or 'boundary', declared, refined, n,
+                                     rng)
             except ValueError as e:
                 self.get_logger().warn(f'ball guess refined from {len(rests)} rests, but {e}: the plan is kept')
                 return None

@@ -5,7 +5,9 @@ messages keep their header stamps) by a publisher of that type, at the recorded 
 ``rate``, after ``delay`` seconds for the subscribers to discover the publishers. QoS:
 /robot_description latched (transient local, depth 1), images (sensor_msgs Image and CompressedImage)
 the sensor-data profile, every other topic reliable with depth 100. A truncated bag is replayed as far
-as it is whole (in file order). Progress goes to stderr; Ctrl-C stops cleanly.
+as it is whole (in file order). The topics are published under their names relative to
+``--namespace`` (default the root: the bag's own names). Progress goes to stderr; Ctrl-C stops
+cleanly.
 """
 import argparse
 import importlib
@@ -19,7 +21,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profi
 
 from robotenis_calibration import bag_io
 
-LATCHED = ('/robot_description',)
+LATCHED = ('robot_description',)
 IMAGE_TYPES = ('sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage')
 ACK_TIMEOUT = Duration(seconds=5)   # for reliable subscribers to receive the last messages
 
@@ -35,7 +37,7 @@ def message_class(type_name):
 
 def qos_for(topic, type_name):
     """QoS profile of a replayed topic (see the module docstring)."""
-    if topic in LATCHED:
+    if topic.lstrip('/') in LATCHED:
         return QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
     if type_name in IMAGE_TYPES:
         return qos_profile_sensor_data
@@ -50,7 +52,8 @@ def create_publishers(node, topics):
         if cls is None:
             print(f'[replay] {topic}: type {type_name} is not installed, not replayed', file=sys.stderr)
             continue
-        publishers[topic] = node.create_publisher(cls, topic, qos_for(topic, type_name))
+        # relative: the bag's topics are the calibration contract's, published in --namespace
+        publishers[topic] = node.create_publisher(cls, topic.lstrip('/'), qos_for(topic, type_name))
     return publishers
 
 
@@ -81,6 +84,7 @@ def main(argv=None):
     parser.add_argument('bag_dir', help='a rosbag2 bag directory')
     parser.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1: recorded timing)')
     parser.add_argument('--delay', type=float, default=1.0, help='s to wait before the first message (default 1)')
+    parser.add_argument('--namespace', default='', help='publish the topics in this namespace')
     args = parser.parse_args(argv)
     if not args.rate > 0:
         parser.error(f'--rate must be positive, got {args.rate}')
@@ -92,7 +96,7 @@ def main(argv=None):
     for note in reader.notes:
         print(f'[replay] {note}', file=sys.stderr)
     rclpy.init()
-    node = rclpy.create_node('replay')
+    node = rclpy.create_node('replay', namespace=args.namespace)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     try:

@@ -24,7 +24,8 @@ holder that the joints do not show).
 
 Averaging, per rest and over the same window for both sensors: non-finite samples are dropped, then
 ``robust_mean`` rejects outliers (false detections): a median/MAD start, then a chi-square gate at
-level ``alpha`` against the spread, iterated with the mean and covariance of the samples kept. The
+level ``alpha`` against the spread, iterated with the mean and covariance of the other samples
+kept (leave one out: the gate is exact for Gaussian samples, however few). The
 covariance of the mean is S / n * (n - 1) / (n - p - 2), S the covariance of one sample: its inverse is
 then an unbiased estimate of the mean's precision (the mean of an inverse Wishart), so chi-square
 statistics keep their expectation even with few frames per rest. Readings use per-joint variances
@@ -41,6 +42,8 @@ from scipy import stats
 from robotenis_calibration import bag_io
 from robotenis_calibration.session import Session
 from robotenis_kinematics import description
+from robotenis_ros.convert import joint_vector
+from robotenis_ros.names import JOINTS
 
 REQUIRED = {
     '/robot_description': 'std_msgs/msg/String',
@@ -48,8 +51,8 @@ REQUIRED = {
     '/sphere/position': 'geometry_msgs/msg/PointStamped',
 }
 MARKERS = ('/calibration/rest', 'robotenis_interfaces/msg/RestMarker')
-JOINTS = ('motor_1', 'motor_2', 'motor_3')
 MAX_PASSES = 50       # of the outlier gate; it settles in a few
+START_ALPHA = 1e-6    # the first, robust gate (median and MAD) only takes out gross outliers
 SPHERE_FLOOR = 1e-9    # m: floor on a frame's standard deviation, far below any detector's; keeps the gate defined
 
 
@@ -91,14 +94,6 @@ def check_topics(reader):
             raise ValueError(f'{topic}: no messages in the bag {reader.path}{why}')
 
 
-def joint_positions(msg):
-    """motor_1..3 positions of a JointState (any name order), or None when they are not all there."""
-    index = {name: i for i, name in enumerate(msg.name)}
-    if len(msg.position) != len(msg.name) or any(j not in index for j in JOINTS):
-        return None
-    return [msg.position[index[j]] for j in JOINTS]
-
-
 def read(reader, notes, progress=None):
     """The Recording of an open BagReader (time order); odd messages are counted in ``notes``."""
     check_topics(reader)
@@ -108,7 +103,7 @@ def read(reader, notes, progress=None):
     for topic, _, stamp, msg in reader.messages(topics, report, steps=10):
         t = stamp * 1e-9
         if topic == '/joint_states':
-            position = joint_positions(msg)
+            position = joint_vector(msg, 'position')
             if position is None:
                 unnamed += 1
             else:
@@ -188,30 +183,53 @@ def found_windows(rec, params):
 
 
 def robust_mean(x, floor, alpha):
-    """Mean (p,), covariance of one sample (p, p) and the mask of samples kept, outliers rejected.
+    """
+    Return the mean (p,), covariance of one sample (p, p) and mask of samples kept, outliers out.
 
-    Start from the median and the MAD (scaled to a standard deviation); keep the samples whose squared
-    Mahalanobis distance is within the chi2(p) quantile 1 - alpha; recompute mean and covariance from
-    them, the covariance divided by the share of a Gaussian's variance the gate keeps
-    (P(chi2(p+2) <= g) / P(chi2(p) <= g)); repeat until the kept set does not change. ``floor`` (p,)
-    bounds each variance from below.
+    Start from the median and the MAD (scaled to a standard deviation), gated at the chi2(p)
+    quantile 1 - START_ALPHA (gross outliers only); then, until the kept set does not change, test every sample against the
+    mean and covariance of the other kept samples (``loo_gate``: exact for Gaussian samples, so a
+    good sample is rejected with probability alpha whatever their number). The covariance is
+    divided by the share of a Gaussian's variance such a gate keeps (P(chi2(p+2) <= g) /
+    P(chi2(p) <= g)); ``floor`` (p,) bounds each variance from below.
     """
     p = x.shape[1]
     gate = stats.chi2.ppf(1 - alpha, p)
     consistency = stats.chi2.cdf(gate, p + 2) / (1 - alpha)
     center = np.median(x, axis=0)
     cov = np.diag(np.maximum((1.4826 * np.median(np.abs(x - center), axis=0)) ** 2, floor))
-    keep = np.zeros(len(x), dtype=bool)
+    d = x - center
+    keep = np.einsum('ni,ij,nj->n', d, np.linalg.inv(cov), d) <= stats.chi2.ppf(1 - START_ALPHA, p)
     for _ in range(MAX_PASSES):
-        d = x - center
-        new = np.einsum('ni,ij,nj->n', d, np.linalg.inv(cov), d) <= gate
-        if np.array_equal(new, keep) or new.sum() < p + 3:
+        if keep.sum() < p + 3:
             break
-        keep = new
         center = x[keep].mean(axis=0)
         cov = np.cov(x[keep], rowvar=False).reshape(p, p) / consistency
         cov += np.diag(np.maximum(floor - np.diag(cov), 0.0))
+        new = loo_gate(x, keep, center, cov, alpha)
+        if np.array_equal(new, keep) or new.sum() < p + 3:
+            break
+        keep = new
     return center, cov, keep
+
+
+def loo_gate(x, keep, center, cov, alpha):
+    """
+    Return the mask of samples within the level-alpha gate of the other kept samples.
+
+    For a Gaussian sample x tested against the mean and unbiased covariance of m others,
+    D^2 m / (m + 1) (m - p) / (p (m - 1)) follows F(p, m - p) (Hotelling). A kept sample's D^2
+    follows from its distance d^2 to the estimate that includes it (n = m + 1 samples):
+    D^2 = (n - 2) n^2 d^2 / ((n - 1) ((n - 1)^2 - n d^2)).
+    """
+    n, p = int(keep.sum()), x.shape[1]
+    d = x - center
+    d2 = np.einsum('ni,ij,nj->n', d, np.linalg.inv(cov), d)
+    inside = np.minimum(d2, (n - 1) ** 2 / n * (1 - 1e-12))     # d^2 of a kept sample is below
+    D2 = np.where(keep, (n - 2) * n ** 2 * inside / ((n - 1) * ((n - 1) ** 2 - n * inside)), d2)
+    m = np.where(keep, n - 1, n)
+    gate = p * (m - 1) / (m - p) * (m + 1) / m * stats.f.ppf(1 - alpha, p, m - p)
+    return D2 <= gate
 
 
 def unbiased_precision_factor(n, p):

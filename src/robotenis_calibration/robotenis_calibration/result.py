@@ -6,7 +6,9 @@ with its parameters and their standard deviations) and ``report`` (the residual 
 """
 import numpy as np
 
+from robotenis_calibration import diagnosis as dg
 from robotenis_kinematics import effects as fx
+from robotenis_kinematics import identification as idf
 from robotenis_kinematics.identification import LEG_PARAMETERS
 
 
@@ -95,8 +97,6 @@ def plot_residuals(diagnosis, meas, sphere, stamps, path):
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
-    from robotenis_calibration import diagnosis as dg
-    from robotenis_kinematics import identification as idf
 
     feats = dg.residual_features(diagnosis.final.model, meas, sphere, stamps)
     shown = ('joint angle', 'motion direction', 'gravity torque', 'image x', 'image y', 'time')

@@ -44,15 +44,15 @@ def answer(r):
 def call(args, timeout_s=3600.0):
     """Call /calibrate and wait for its answer, showing /calibration/progress; the exit status."""
     rclpy.init()
-    node = rclpy.create_node('calibrate_client')
+    node = rclpy.create_node('calibrate_client', namespace=getattr(args, 'namespace', '') or '')
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    client = node.create_client(Calibrate, '/calibrate')
-    node.create_subscription(CalibrationProgress, '/calibration/progress', show, 10)
+    client = node.create_client(Calibrate, 'calibrate')
+    node.create_subscription(CalibrationProgress, 'calibration/progress', show, 10)
     try:
         if not client.wait_for_service(timeout_sec=SERVICE_WAIT):
-            print('robotenis calibrate: no /calibrate service (start the system: ./robotenis launch)',
-                  file=sys.stderr)
+            print(f'robotenis calibrate: no {client.srv_name} service (start the system: '
+                  './robotenis launch)', file=sys.stderr)
             return 2
         future = client.call_async(request_from(args))
         executor.spin_until_future_complete(future, timeout_sec=timeout_s)

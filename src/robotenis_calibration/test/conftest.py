@@ -14,8 +14,7 @@ def nominal():
 @pytest.fixture
 def table1():
     """Table 1's calibrated column (the kinematics package's test geometry)."""
-    here = os.path.dirname(os.path.abspath(__file__))
-    return description.load(os.path.join(here, '..', '..', 'robotenis_kinematics', 'test', 'table1_calibrated.yaml'))
+    return description.load(description.config_path('table1_calibrated.yaml'))
 
 
 @pytest.fixture

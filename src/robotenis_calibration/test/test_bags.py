@@ -1,5 +1,5 @@
 """Recorded sessions: bag round trip, truncated and incomplete bags, rest finding, robust averaging,
-and offline calibration from a bag to RESULT.yaml (simulated bags: robotenis_calibration.bag_sim).
+and offline calibration from a bag to RESULT.yaml (bags another driver would record: robotenis_sim.session_bag).
 
 Tolerances are chi-square quantiles at 1 - 1e-3 of the stated noise, so each check fails by chance
 about once in a thousand runs at most.
@@ -13,8 +13,9 @@ from mcap.records import Message
 from mcap.stream_reader import StreamReader
 from scipy import stats
 
-from robotenis_calibration import bag_io, bag_sim, calibrate_cli, pipeline, rests
-from robotenis_calibration.study import EFFECTS
+from robotenis_calibration import bag_io, calibrate_cli, pipeline, rests
+from robotenis_sim import session_bag as bag_sim
+from robotenis_sim.scenarios import EFFECTS
 from robotenis_kinematics import description
 
 CLEAN = bag_sim.BagSpec(poses=80, seed=3)

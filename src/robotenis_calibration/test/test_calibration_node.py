@@ -15,17 +15,20 @@ from rclpy.executors import SingleThreadedExecutor
 from robotenis_calibration import bag_io
 from robotenis_interfaces.srv import Calibrate
 
+GUESS = [0.73, -0.02, 1.37]   # m: where the session looks for the ball (no ball is needed here)
+
 
 @pytest.fixture
 def service(tmp_path, console_script, ros_env):
     log = open(tmp_path / 'node.log', 'w')
-    args = ['--ros-args', '-p', f'bags_dir:={tmp_path}', '-p', 'num_poses:=30']
+    args = ['--ros-args', '-p', f'bags_dir:={tmp_path}', '-p', 'num_poses:=30',
+            '-p', f'sphere_guess:={GUESS}']
     proc = subprocess.Popen([console_script('calibration'), *args], env=ros_env, stdout=log, stderr=subprocess.STDOUT)
     rclpy.init()
     node = rclpy.create_node('calibration_probe')
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    client = node.create_client(Calibrate, '/calibrate')
+    client = node.create_client(Calibrate, 'calibrate')
     try:
         assert client.wait_for_service(timeout_sec=20.0), 'no /calibrate service'
         yield client, executor, proc

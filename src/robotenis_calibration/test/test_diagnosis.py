@@ -4,7 +4,7 @@ import pytest
 from scipy import stats
 
 from robotenis_calibration import diagnosis, poses, result
-from robotenis_calibration.study import EFFECTS as STUDY
+from robotenis_sim.scenarios import EFFECTS as STUDY
 from robotenis_calibration.session import Session
 from robotenis_kinematics import delta, description, effects, synthetic
 from robotenis_sim import static_session

@@ -16,7 +16,8 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import CompressedImage
 from std_msgs.msg import String
 
-from robotenis_calibration import bag_io, bag_sim
+from robotenis_calibration import bag_io
+from robotenis_sim import session_bag as bag_sim
 
 RATE = 4.0
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from robotenis_control import dynamics, trajectory
-from robotenis_kinematics import effects, workspace
+from robotenis_kinematics import delta, effects, workspace
 
 JOINT_EFFECTS = ('joint_scale', 'backlash', 'gravity_compliance')
 MOVING = 1e-3   # rad/s: a joint faster than this sets its motion direction (for backlash)
@@ -183,3 +183,70 @@ class MotionController:
     @property
     def moving(self):
         return bool(self.segments) or self.velocity is not None
+
+
+def description_groups(descs):
+    """Return [(description, indices)] of the runs that share one description object."""
+    out = {}
+    for i, d in enumerate(descs):
+        out.setdefault(id(d), (d, []))[1].append(i)
+    return [(d, np.array(idx)) for d, idx in out.values()]
+
+
+def forward_by_group(groups, alpha):
+    """Return the forward kinematics of each run's own description at arm angles alpha (N, 3)."""
+    P = np.empty_like(alpha)
+    for desc, idx in groups:
+        P[idx] = delta.forward(desc, alpha[idx])
+    return P
+
+
+class BatchVelocityController:
+    """
+    MotionController's velocity mode for N runs at once, vectorised over runs.
+
+    Each run follows its own description (``descs``, one per run; runs sharing a description
+    object are computed together): the held position integrates the run's Cartesian command while
+    it is fresher than ``velocity_timeout``, and eq. 11 on the inverse dynamics of the description
+    gives the drive commands. Left out: goals, the workspace check and joint effects (the
+    descriptions must declare none).
+    """
+
+    def __init__(self, descs, mass=dynamics.MassParameters(), gains=Gains(), max_speed=2.0,
+                 velocity_timeout=0.1):
+        joint = [d for d in descs if set(effects.parameters(d)) & set(JOINT_EFFECTS)]
+        if joint:
+            raise ValueError('BatchVelocityController: descriptions with joint effects '
+                             'are not supported')
+        self.mass, self.gains, self.max_speed = mass, gains, float(max_speed)
+        self.velocity_timeout = velocity_timeout
+        self.groups = description_groups(descs)
+        self.theta0 = np.array([d.theta0 for d in descs])
+        self.hold, self.last_t = None, None
+        self.v = np.zeros((len(descs), 3))
+        self.received = np.full(len(descs), -np.inf)
+        self.command = np.zeros((len(descs), 3))
+
+    def set_velocity(self, U, t):
+        """Follow the Cartesian velocities U (N, 3), m/s, from time t; each clipped to max_speed."""
+        U = np.asarray(U, dtype=float)
+        speed = np.linalg.norm(U, axis=1, keepdims=True)
+        self.v = U * np.minimum(1.0, self.max_speed / np.maximum(speed, 1e-300))
+        self.received[:] = t
+
+    def update(self, t, Theta, dTheta):
+        """Return the drive commands (N, 3), rad/s, for the readings Theta, dTheta (N, 3) at t."""
+        alpha = self.theta0 + Theta
+        if self.hold is None:
+            self.hold = forward_by_group(self.groups, alpha)
+        active = (t - self.received <= self.velocity_timeout)[:, None]
+        v = np.where(active, self.v, 0.0)
+        if self.last_t is not None:
+            self.hold = self.hold + v * max(t - self.last_t, 0.0)
+        self.last_t = t
+        for desc, idx in self.groups:
+            jm = dynamics.inverse_dynamics(desc, self.mass, self.hold[idx], v[idx],
+                                           np.zeros((len(idx), 3)))
+            self.command[idx] = velocity_command(jm.alpha, jm.dalpha, jm.tau, alpha[idx],
+                                                 dTheta[idx], self.gains)
+        return self.command.copy()

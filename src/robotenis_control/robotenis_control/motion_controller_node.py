@@ -1,10 +1,10 @@
 """The `motion_controller` node: Cartesian goals and velocities to drive velocity commands (eq. 11).
 
-Subscribes /joint_states (motor_1..3, position = resolver increment from home, rad; velocity rad/s),
-/goal (PointStamped, base frame, m: chained rest-to-rest 4-5-6-7 segments), /cmd_vel_cartesian
-(TwistStamped, linear m/s: replaces the plan while commands keep coming) and /robot_description
-(std_msgs/String, latched, e.g. from calibration). Publishes /motor_velocity_cmd (JointState, velocity
-field, motor_1..3) every tick and /controller/state (PointStamped: the effector position from the
+Subscribes joint_states (motor_1..3, position = resolver increment from home, rad; velocity rad/s),
+goal (PointStamped, base frame, m: chained rest-to-rest 4-5-6-7 segments), cmd_vel_cartesian
+(TwistStamped, linear m/s: replaces the plan while commands keep coming) and robot_description
+(std_msgs/String, latched, e.g. from calibration). Publishes motor_velocity_cmd (JointState, velocity
+field, motor_1..3) every tick and controller/state (PointStamped: the effector position from the
 forward kinematics of the description in use) every ``state_decimation`` ticks.
 
 Ticks come from a timer at ``rate`` (wall clock, or /clock with use_sim_time), or, with
@@ -14,57 +14,58 @@ carries the reading's stamp). The description is reloaded by the ~/reload_descri
 """
 import sys
 
-import numpy as np
 from geometry_msgs.msg import PointStamped, TwistStamped
-from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from robotenis_control import controller as ctl
+from robotenis_kinematics import description
+from robotenis_kinematics.description import DescriptionError
+from robotenis_ros.convert import joint_state, joint_vector, point_stamped, stamp_seconds, xyz
+from robotenis_ros.names import BASE_FRAME
+from robotenis_ros.node import declare_parameters, LATCHED, spin
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from robotenis_control import controller as ctl
-from robotenis_kinematics import description
-from robotenis_kinematics.description import DescriptionError
-from robotenis_kinematics.ros import JOINTS, joint_vector, spin, stamp_seconds
-
 GAIN_PARAMETERS = ('kp', 'kd', 'kv')
-STALE_READING_S = 0.05   # no joint reading for this long: command zero speed (the drives then brake)
+STALE_READING_S = 0.05   # no joint reading for this long: command zero speed (the drives brake)
+PARAMETERS = {
+    'description_path': (description.config_path('nominal.yaml'), 'the robot description YAML'),
+    'kp': (ctl.Gains.kp, '1/s: gain on the joint position error (eq. 11)'),
+    'kd': (ctl.Gains.kd, 'gain on the joint velocity error (eq. 11)'),
+    'kv': (ctl.Gains.kv, "N m s/rad: the controller's value of the drives' K_V (eq. 10)"),
+    'max_speed': (2.0, 'm/s: top speed of the planned segments and of velocity commands'),
+    'max_acceleration': (4 * 9.81, 'm/s^2: top acceleration of the planned segments'),
+    'rate': (1000.0, 'Hz: control ticks (without tick_on_joint_states)'),
+    'velocity_timeout': (0.1, 's a velocity command holds before the position is held'),
+    'state_decimation': (10, 'ticks per controller/state message'),
+    'tick_on_joint_states': (False, 'tick on every joint reading (lockstep with a simulator)'),
+}
 
 
 class MotionControllerNode(Node):
+
     def __init__(self):
         super().__init__('motion_controller')
-        self.declare_parameter('description_path', description.config_path('nominal.yaml'))
-        self.declare_parameter('kp', ctl.Gains.kp)
-        self.declare_parameter('kd', ctl.Gains.kd)
-        self.declare_parameter('kv', ctl.Gains.kv)
-        self.declare_parameter('max_speed', 2.0)
-        self.declare_parameter('max_acceleration', 4 * 9.81)
-        self.declare_parameter('rate', 1000.0)
-        self.declare_parameter('velocity_timeout', 0.1)
-        self.declare_parameter('state_decimation', 10)
-        self.declare_parameter('tick_on_joint_states', False)
-        p = self.get_parameter
+        p = declare_parameters(self, PARAMETERS)
         self.controller = ctl.MotionController(
-            description.load(p('description_path').value), gains=self.read_gains({}),
-            max_speed=p('max_speed').value, max_acceleration=p('max_acceleration').value,
-            velocity_timeout=p('velocity_timeout').value)
+            description.load(p['description_path']), gains=self.read_gains({}),
+            max_speed=p['max_speed'], max_acceleration=p['max_acceleration'],
+            velocity_timeout=p['velocity_timeout'])
         self.add_on_set_parameters_callback(self.on_parameters)
         self.reading = None          # (Theta, dTheta, receive time)
         self.ticks = 0
-        self.cmd_pub = self.create_publisher(JointState, '/motor_velocity_cmd', 10)
-        self.state_pub = self.create_publisher(PointStamped, '/controller/state', 10)
-        self.create_subscription(JointState, '/joint_states', self.on_joint_states, 10)
-        self.create_subscription(PointStamped, '/goal', self.on_goal, 10)
-        self.create_subscription(TwistStamped, '/cmd_vel_cartesian', self.on_velocity, 10)
-        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.create_subscription(String, '/robot_description', self.on_description_text, latched)
+        self.cmd_pub = self.create_publisher(JointState, 'motor_velocity_cmd', 10)
+        self.state_pub = self.create_publisher(PointStamped, 'controller/state', 10)
+        self.create_subscription(JointState, 'joint_states', self.on_joint_states, 10)
+        self.create_subscription(PointStamped, 'goal', self.on_goal, 10)
+        self.create_subscription(TwistStamped, 'cmd_vel_cartesian', self.on_velocity, 10)
+        self.create_subscription(String, 'robot_description', self.on_description_text, LATCHED)
         self.create_service(Trigger, '~/reload_description', self.on_reload)
-        self.tick_on_joint_states = p('tick_on_joint_states').value
-        self.state_decimation = max(1, int(p('state_decimation').value))
+        self.tick_on_joint_states = p['tick_on_joint_states']
+        self.state_decimation = max(1, int(p['state_decimation']))
         if not self.tick_on_joint_states:
-            self.create_timer(1.0 / p('rate').value, self.on_timer)
+            self.create_timer(1.0 / p['rate'], self.on_timer)
 
     def now(self):
         return self.get_clock().now().nanoseconds * 1e-9
@@ -126,7 +127,7 @@ class MotionControllerNode(Node):
 
     def on_goal(self, msg):
         try:
-            self.controller.add_goal([msg.point.x, msg.point.y, msg.point.z], self.now())
+            self.controller.add_goal(xyz(msg.point), self.now())
         except ctl.GoalError as e:
             self.get_logger().error(f'goal refused: {e}')
 
@@ -134,7 +135,7 @@ class MotionControllerNode(Node):
         if self.reading is None:
             return
         try:
-            self.controller.set_velocity([msg.twist.linear.x, msg.twist.linear.y, msg.twist.linear.z], self.now())
+            self.controller.set_velocity(xyz(msg.twist.linear), self.now())
         except ctl.GoalError as e:
             self.get_logger().error(f'velocity command refused: {e}')
 
@@ -146,22 +147,16 @@ class MotionControllerNode(Node):
             return
         Theta, dTheta, received = self.reading
         t = received if self.tick_on_joint_states else self.now()
-        cmd = JointState(name=list(JOINTS))
-        cmd.header.stamp = stamp
         if t - received > STALE_READING_S:
-            self.get_logger().warn('no joint reading for 50 ms: commanding zero speed', throttle_duration_sec=1.0)
-            cmd.velocity = [0.0, 0.0, 0.0]
-            self.cmd_pub.publish(cmd)
+            self.get_logger().warn('no joint reading for 50 ms: commanding zero speed',
+                                   throttle_duration_sec=1.0)
+            self.cmd_pub.publish(joint_state(stamp, velocity=[0.0, 0.0, 0.0]))
             return
         ref, P_est = self.controller.update(t, Theta, dTheta)
-        cmd.velocity = [float(v) for v in ref]
-        self.cmd_pub.publish(cmd)
+        self.cmd_pub.publish(joint_state(stamp, velocity=ref))
         self.ticks += 1
         if self.ticks % self.state_decimation == 0:
-            state = PointStamped()
-            state.header.stamp, state.header.frame_id = stamp, 'base'
-            state.point.x, state.point.y, state.point.z = (float(v) for v in P_est)
-            self.state_pub.publish(state)
+            self.state_pub.publish(point_stamped(P_est, stamp, BASE_FRAME))
 
 
 def main(args=None):

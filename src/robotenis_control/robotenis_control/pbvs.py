@@ -11,6 +11,8 @@ feeds the motion forward. J_R^-1 comes from the robot description in use (nomina
 the tracking error reported is |e_r|. ``Tracker`` puts the pieces together for one robot: what the
 pbvs_tracker node and the tracking study's reference engine both run.
 """
+from collections import deque
+
 import numpy as np
 
 from robotenis_control.controller import JOINT_EFFECTS, MOVING
@@ -147,3 +149,46 @@ class Tracker:
         theta = effects.model_joint_angles(self.desc, self.joint_fx, Theta[None], self.direction[None], P[None],
                                            effects.gravity_load(self.desc))[0][0]
         return delta.forward(self.desc, theta)
+
+
+class ReadingMatcher:
+    """
+    Pairs each detection with the joint reading nearest its exposure.
+
+    A detection waits for a joint reading at or after its exposure: a node's executor may hand
+    the detection over before the readings queued ahead of it, and an older reading would misplace
+    the ball by the robot's motion since then (5 mm at 1 m/s and 5 ms), which the ball's filter
+    would take for a jump. ``reading`` and ``detection`` return the pairs ready to track, as
+    (t, s, key, Theta) with Theta None when no reading lies within ``match_s`` of the exposure.
+    """
+
+    STAMP_TOLERANCE = 1e-6   # s: stamps travel in whole nanoseconds
+
+    def __init__(self, match_s=0.02, history=200, waiting=10):
+        """Keep ``history`` readings and ``waiting`` detections (more: the readings stopped)."""
+        self.match_s = match_s
+        self.readings = deque(maxlen=history)      # (t, Theta)
+        self.waiting = deque(maxlen=waiting)       # (t, s, key) ahead of their reading
+
+    def reading(self, t, Theta):
+        """A joint reading at time t; the detections that were waiting for it."""
+        self.readings.append((t, Theta))
+        ready = []
+        while self.waiting and self.waiting[0][0] <= t + self.STAMP_TOLERANCE:
+            ready.append(self._pair(*self.waiting.popleft()))
+        return ready
+
+    def detection(self, t, s, key=None):
+        """A detection exposed at t; itself paired, or nothing while its reading is on the way."""
+        if not self.readings or self.readings[-1][0] < t - self.STAMP_TOLERANCE:
+            self.waiting.append((t, s, key))
+            return []
+        return [self._pair(t, s, key)]
+
+    def clear(self):
+        """Forget the detections waiting (e.g. for a tracker just replaced)."""
+        self.waiting.clear()
+
+    def _pair(self, t, s, key):
+        stamp, Theta = min(self.readings, key=lambda r: abs(r[0] - t))
+        return t, s, key, (Theta if abs(stamp - t) <= self.match_s else None)

@@ -75,3 +75,28 @@ def test_velocity_commands_integrate_then_time_out(desc):
     P, dP, _ = c.desired(0.2)                             # no command for 0.15 s: hold
     np.testing.assert_allclose(dP, 0)
     assert not c.moving
+
+
+def test_batch_velocity_mode_commands_as_the_scalar_controller_does():
+    """BatchVelocityController is MotionController's velocity mode vectorised over runs, each run
+    with its own description: the same readings and velocity commands give the same drive
+    commands, through a timeout too."""
+    descs = [description.nominal(), description.load(description.config_path(
+        'table1_calibrated.yaml'))]
+    runs = [descs[0], descs[1], descs[0]]
+    batch = ctl.BatchVelocityController(runs, velocity_timeout=0.05)
+    scalar = [ctl.MotionController(d, velocity_timeout=0.05) for d in runs]
+    rng = np.random.default_rng(3)
+    Theta = rng.normal(scale=0.05, size=(3, 3))
+    for k in range(150):
+        t = 1e-3 * k
+        Theta = Theta + rng.normal(scale=1e-4, size=(3, 3))
+        dTheta = rng.normal(scale=0.01, size=(3, 3))
+        if k in (1, 40):                             # commands at 1 and 40 ms; timeout from 90 ms
+            U = rng.normal(scale=1.0, size=(3, 3))
+            batch.set_velocity(U, t)
+            for c, u in zip(scalar, U):
+                c.set_velocity(u, t)
+        expected = [c.update(t, th, dth)[0] for c, th, dth in zip(scalar, Theta, dTheta)]
+        np.testing.assert_allclose(batch.update(t, Theta, dTheta), expected, atol=1e-9)
+    assert not any(c.moving for c in scalar)         # the timeout was reached

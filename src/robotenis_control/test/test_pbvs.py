@@ -159,3 +159,20 @@ def test_tracker_clips_the_command_and_ignores_repeats():
     assert tracker.update(1.0, pbvs.S_DESIRED, readings(desc, P_ROBOT)) is None          # a repeat
     assert tracker.update(1.0 - FRAME, pbvs.S_DESIRED, readings(desc, P_ROBOT)) is None  # out of order
     np.testing.assert_array_equal(tracker.kalman.x, x)
+
+
+def test_the_matcher_pairs_a_detection_with_the_reading_of_its_exposure():
+    matcher = pbvs.ReadingMatcher(match_s=0.02)
+    for k in range(5):
+        assert matcher.reading(1.0 + 1e-3 * k, np.full(3, k)) == []
+    (t, s, key, Theta), = matcher.detection(1.002, 'ball', 'stamp')
+    assert (t, s, key) == (1.002, 'ball', 'stamp') and Theta[0] == 2
+    assert matcher.detection(1.006, 'later', None) == []         # its reading is on the way
+    assert matcher.reading(1.005, np.full(3, 5)) == []
+    (_, s, _, Theta), = matcher.reading(1.006, np.full(3, 6))
+    assert s == 'later' and Theta[0] == 6
+    (_, _, _, Theta), = matcher.detection(0.9, 'old', None)      # nothing within 20 ms of it
+    assert Theta is None
+    matcher.detection(2.0, 'waiting', None)
+    matcher.clear()
+    assert matcher.reading(2.0, np.zeros(3)) == []

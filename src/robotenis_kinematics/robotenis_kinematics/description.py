@@ -24,13 +24,11 @@ import tempfile
 from dataclasses import dataclass, field
 
 import numpy as np
+from robotenis_kinematics import effects as effect_models
+from robotenis_kinematics.errors import DescriptionError
 import yaml
 
 LEG_KEYS = ('phi', 'H', 'a', 'b', 'h', 'theta0')
-
-
-class DescriptionError(ValueError):
-    """A robot description that cannot be used; the message names the offending key."""
 
 
 @dataclass
@@ -143,9 +141,8 @@ def from_dict(data):
     effects = data.get('effects') or []
     if not isinstance(effects, list) or any(not isinstance(e, dict) or 'name' not in e for e in effects):
         raise DescriptionError("effects: expected a list of maps, each with a 'name'")
-    from robotenis_kinematics import effects as effect_models  # the effect models check their own keys
     for i, e in enumerate(effects):
-        effect_models.validate(e, f'effects[{i}]')
+        effect_models.validate(e, f'effects[{i}]')   # each effect model checks its own keys
     report = data.get('report') or {}
     if not isinstance(report, dict):
         raise DescriptionError("report: expected a map")

@@ -22,7 +22,7 @@ is applied in the legs' phi and H themselves; its entry records what was identif
 import numpy as np
 
 from robotenis_kinematics import delta
-from robotenis_kinematics.description import DescriptionError
+from robotenis_kinematics.errors import DescriptionError
 
 G = 9.81
 # Nominal static gravity load (kg): each arm carries half its own mass (m_a = 1.0) and half a forearm

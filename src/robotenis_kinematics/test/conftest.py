@@ -15,4 +15,4 @@ def nominal():
 @pytest.fixture
 def table1():
     """Table 1's calibrated column: a known geometry to generate data from and score against."""
-    return description.load(os.path.join(HERE, 'table1_calibrated.yaml'))
+    return description.load(description.config_path('table1_calibrated.yaml'))

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from robotenis_vision.camera import Camera
 
 SUPERSAMPLE = 8               # rays per pixel side near the outline
 BANK = 8                      # finished background frames, one drawn per image
@@ -101,7 +102,6 @@ def _camera_key(camera):
 def _ray_maps(key):
     """Undistorted normalized (x, y) of every pixel centre and their derivatives along u and v."""
     K, D, width, height = np.frombuffer(key[0]).reshape(3, 3), np.frombuffer(key[1]), key[2], key[3]
-    from robotenis_vision.camera import Camera
     camera = Camera(K, D, width, height)
     u, v = np.meshgrid(np.arange(width, dtype=float), np.arange(height, dtype=float))
     xy = camera.pixel_rays(np.stack([u, v], axis=-1))

@@ -19,7 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robotenis_control.dynamics import MassParameters, SingleRobotDynamics
+from robotenis_control.dynamics import forward_dynamics, MassParameters, SingleRobotDynamics
+from robotenis_kinematics import delta
 
 
 @dataclass(frozen=True)
@@ -150,6 +151,63 @@ class SimulatedMotors:
         """TRUE effector position and velocity (m, m/s, base frame): ground truth for scoring only."""
         _, P, dP = self.model.accelerations(self.alpha, self.dalpha, [0.0, 0.0, 0.0])
         return np.array(P), np.array(dP)
+
+
+class BatchMotors:
+    """
+    N true robots of one geometry, stepped together: SimulatedMotors vectorised over robots.
+
+    The same drives (eq. 10, clipped to the torque limit), RK4 over one period on
+    dynamics.forward_dynamics, resolvers (counts unless ``quantise`` is False, white noise) and
+    brakes until the first command; no joint effects. Arrays have one row per robot: alpha and
+    dalpha (N, 3), commands (N, 3). For studies that run hundreds of robots (a scalar step costs
+    about 0.5 ms per robot, a batch step a few ms almost whatever N).
+    """
+
+    def __init__(self, geometry, mass, Theta_start, drives=DriveParameters(),
+                 resolver=ResolverParameters(), dt=1e-3, rng=None, quantise=True):
+        self.geometry, self.mass, self.drives, self.resolver = geometry, mass, drives, resolver
+        self.dt = float(dt)
+        self.rng = rng if rng is not None else np.random.default_rng()
+        self.q = resolver.resolution if quantise else None
+        self.theta0 = np.asarray(geometry.theta0, dtype=float)
+        self.alpha = self.theta0 + np.asarray(Theta_start, dtype=float)
+        self.dalpha = np.zeros_like(self.alpha)
+        self.command = np.zeros_like(self.alpha)
+        self.brakes = True
+        self._last_reading = self._quantised(self.alpha - self.theta0)
+
+    def set_command(self, dalpha_ref):
+        """Latch the drives' velocity commands (N, 3), rad/s; the first releases the brakes."""
+        self.command = np.asarray(dalpha_ref, dtype=float)
+        self.brakes = False
+
+    def _quantised(self, Theta):
+        return Theta if self.q is None else np.round(Theta / self.q) * self.q
+
+    def _accelerations(self, t, alpha, dalpha):
+        alpha, dalpha = np.asarray(alpha).T, np.asarray(dalpha).T
+        K, lim = self.drives.K_V, self.drives.torque_limit
+        tau = np.clip(K * (self.command - dalpha), -lim, lim)
+        return forward_dynamics(self.geometry, self.mass, alpha, dalpha, tau).T
+
+    def step(self):
+        """Advance every robot one period, unless the brakes hold them."""
+        if not self.brakes:
+            alpha, dalpha = rk4_step(self._accelerations, 0.0, self.alpha.T, self.dalpha.T, self.dt)
+            self.alpha, self.dalpha = np.asarray(alpha).T, np.asarray(dalpha).T
+
+    def read(self):
+        """Return (Theta, dTheta), each (N, 3), as SimulatedMotors.read does for each robot."""
+        noise = self.rng.normal(scale=self.resolver.noise, size=self.alpha.shape)
+        Theta = self._quantised(self.alpha - self.theta0 + noise)
+        dTheta = (Theta - self._last_reading) / self.dt
+        self._last_reading = Theta
+        return Theta, dTheta
+
+    def effector(self):
+        """Return the TRUE effector positions (N, 3), m: ground truth for scoring only."""
+        return delta.forward(self.geometry, self.alpha)
 
 
 def true_masses(truth):

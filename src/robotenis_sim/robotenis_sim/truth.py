@@ -3,6 +3,8 @@
 Read by the simulator only. A truth file is YAML::
 
     geometry: {legs: ..., camera: ..., sphere_radius: ...}   # robot description schema: the TRUE geometry
+                                             # (or a description file: a path relative to the truth
+                                             # file, or package://PACKAGE/PATH in a package's share)
     camera_translation: [0.12, 0.0, 0.04]   # optical centre in the effector frame, m
     sphere_position: [0.70, 0.0, 1.35]      # centre of the fixed calibration ball, base frame, m
     effects:                                 # all optional, none on by default
@@ -112,12 +114,24 @@ def _vector(value, key, n=3):
     return arr
 
 
-def from_dict(data):
-    """Truth from parsed YAML; errors name the key."""
+def geometry_file(name, folder):
+    """Return the path of a geometry given by file: package://PACKAGE/PATH, or relative to folder."""
+    if name.startswith('package://'):
+        from ament_index_python.packages import get_package_share_directory
+        package, _, rest = name[len('package://'):].partition('/')
+        return os.path.join(get_package_share_directory(package), rest)
+    return os.path.join(folder, name)
+
+
+def from_dict(data, folder='.'):
+    """Truth from parsed YAML (files it names are relative to ``folder``); errors name the key."""
     if not isinstance(data, dict) or 'geometry' not in data:
         raise DescriptionError("truth: geometry: missing key")
     try:
-        geometry = description.from_dict(data['geometry'])
+        if isinstance(data['geometry'], str):
+            geometry = description.load(geometry_file(data['geometry'], folder))
+        else:
+            geometry = description.from_dict(data['geometry'])
     except DescriptionError as e:
         raise DescriptionError(f"geometry.{e}") from None
     effects = dict(data.get('effects') or {})
@@ -149,7 +163,7 @@ def load(path=None):
         except yaml.YAMLError as e:
             raise DescriptionError(f"{path}: not valid YAML ({e})") from e
     try:
-        return from_dict(data)
+        return from_dict(data, os.path.dirname(os.path.abspath(path)))
     except DescriptionError as e:
         raise DescriptionError(f"{path}: {e}") from None
 

@@ -5,7 +5,7 @@ import pytest
 from scipy.stats import chi2
 
 from robotenis_sim import camera_model as cm, truth as sim_truth
-from robotenis_vision import camera
+from robotenis_vision import camera, detector
 
 R = 0.0095
 CAM = camera.default()
@@ -88,12 +88,12 @@ def test_bad_input_is_named():
 def test_hand_camera_messages():
     """The node's messages: mono8 image bytes row by row, camera_info fields from the camera."""
     from std_msgs.msg import Header
-    from robotenis_sim.hand_camera_node import camera_info_message, image_message
+    from robotenis_ros.convert import camera_info_message, image_message
     image = np.arange(12, dtype=np.uint8).reshape(3, 4)
     msg = image_message(image, Header(frame_id='camera_optical'))
     assert (msg.height, msg.width, msg.step, msg.encoding) == (3, 4, 4, 'mono8')
     assert bytes(msg.data) == image.tobytes()
-    info = camera_info_message(CAM, Header(frame_id='camera_optical'))
+    info = camera_info_message(CAM.camera_info_fields(), Header(frame_id='camera_optical'))
     assert (info.width, info.height, info.distortion_model) == (640, 480, 'plumb_bob')
     np.testing.assert_array_equal(np.reshape(info.k, (3, 3)), CAM.K)
     np.testing.assert_array_equal(info.d, CAM.D)
@@ -144,3 +144,19 @@ def test_a_ball_just_past_the_border_renders():
         u = rim - r_px
         for C in ([(u - CAM.cx) * z / CAM.fx, 0.0, z], [0.0, (u - CAM.cy) * z / CAM.fy, z]):
             assert cm.render(CAM, C, R, rng, noise_sigma=0.0).shape == (CAM.height, CAM.width)
+
+
+def test_the_detector_measures_a_render_at_200_mm_on_axis_to_its_resolution():
+    """Shading, highlight, gradient and textured background, blur and noise: the outline is found
+    to 1/50 px (robotenis_vision's test_edges), so the centre is good to that resolution over the
+    ball's apparent radius along the line of sight and over f across it, plus 3 standard errors."""
+    c, resolution = np.array([0.0, 0.0, 0.2]), 0.02
+    rng = np.random.default_rng(5)
+    dets = [detector.detect(cm.render(CAM, c, R, rng), CAM, R) for _ in range(10)]
+    errors = np.array([d.position for d in dets]) - c
+    P = np.mean([d.covariance for d in dets], axis=0)
+    mean = errors.mean(axis=0)
+    tol_along = c[2] * resolution / (CAM.fx * R / c[2])
+    tol_across = c[2] * resolution / CAM.fx
+    assert abs(mean[2]) < tol_along + 3 * np.sqrt(P[2, 2] / 10)
+    assert np.hypot(*mean[:2]) < tol_across + 3 * np.sqrt((P[0, 0] + P[1, 1]) / 10)

@@ -142,3 +142,30 @@ def test_a_calibrated_models_joint_effects_bring_the_robot_to_the_goal(desc):
         errors.append(np.linalg.norm(sim.effector()[0] - goal))
     bound = np.linalg.norm(delta.jacobian(truth.geometry, goal), 2) * 4 * motors.ResolverParameters().resolution
     assert errors[0] < bound < errors[1], (errors, bound)
+
+
+def test_batch_motors_step_as_the_scalar_motors_do(desc):
+    """BatchMotors is SimulatedMotors vectorised: the same commands give the same arms, readings
+    and effector, to rounding (the two evaluate the dynamics with different code)."""
+    truth = sim_truth.load()
+    mass = motors.true_masses(truth)
+    start = np.array([[0.0, 0.0, 0.0], [0.1, -0.05, 0.2], [-0.1, 0.15, 0.05]])
+    resolver = motors.ResolverParameters(noise=0.0)
+    batch = motors.BatchMotors(truth.geometry, mass, start, resolver=resolver)
+    scalar = [motors.SimulatedMotors(truth.geometry, mass, resolver=resolver, Theta_start=s)
+              for s in start]
+    rng = np.random.default_rng(2)
+    for k in range(200):
+        readings = batch.read()
+        np.testing.assert_allclose(readings[0], [m.read()[0] for m in scalar], atol=1e-12)
+        if k >= 20:                                      # brakes on for the first 20 ms
+            command = rng.normal(scale=0.5, size=(3, 3))
+            batch.set_command(command)
+            for m, c in zip(scalar, command):
+                m.set_command(c)
+        batch.step()
+        for m in scalar:
+            m.step()
+    np.testing.assert_allclose(batch.alpha, [m.alpha for m in scalar], atol=1e-10)
+    np.testing.assert_allclose(batch.effector(), [m.effector()[0] for m in scalar], atol=1e-10)
+    assert np.ptp(batch.alpha, axis=0).min() > 0.01     # the robots did move, differently

@@ -6,7 +6,7 @@ import rclpy
 from geometry_msgs.msg import TwistStamped
 from sensor_msgs.msg import JointState
 
-from robotenis_kinematics.ros import JOINTS
+from robotenis_ros.names import JOINTS
 from robotenis_sim.sim_motors_node import SimMotorsNode
 
 DELAY, TIMEOUT = 1.0 / 120.0, 0.05
@@ -43,10 +43,10 @@ def visual_answer(node, t):
 def test_the_simulator_waits_for_each_frames_command_while_the_loop_answers(node):
     # nothing has answered yet: frames go by unwaited
     assert controller_answers(node, 50) == pytest.approx(0.050)
-    visual_answer(node, node.exposures[-1])               # the loop answers its latest frame
-    while not node.exposures:
+    visual_answer(node, node.schedule.exposures[-1])               # the loop answers its latest frame
+    while not node.schedule.exposures:
         controller_answers(node, 1)
-    t_frame = node.exposures[0]                           # the next frame, not answered yet
+    t_frame = node.schedule.exposures[0]                           # the next frame, not answered yet
     t = controller_answers(node, 50)
     assert t < t_frame + DELAY <= t + node.sim.dt + 1e-9  # stopped at the step before its deadline
     visual_answer(node, t_frame)                          # its command comes: the simulator goes on
@@ -55,9 +55,9 @@ def test_the_simulator_waits_for_each_frames_command_while_the_loop_answers(node
 
 def test_an_unanswered_frame_is_given_up_after_the_timeout_and_then_not_waited_for(node):
     controller_answers(node, 50)
-    visual_answer(node, node.exposures[-1])
+    visual_answer(node, node.schedule.exposures[-1])
     t = controller_answers(node, 50)                      # waiting for the next frame's command
     time.sleep(1.5 * TIMEOUT)
     node.on_timer()                                       # the timer notices the timeout
-    assert node.sim.t > t and not node.visual_answers
+    assert node.sim.t > t and not node.schedule.visual_answers
     assert controller_answers(node, 50) == pytest.approx(t + node.sim.dt + 0.050)  # no more waiting

@@ -12,11 +12,11 @@ import cv2
 import numpy as np
 
 from robotenis_vision import edges
+from robotenis_vision.detection import Detection, DetectionError, RANGE
 
 
 def detect(img_f32, camera, R):
     """A detector.Detection by the baseline; DetectionError if no blob is found."""
-    from robotenis_vision.detector import RANGE, Detection, DetectionError
     try:
         centre, r = edges.rough_circle(img_f32, camera.fx * R / RANGE[1], camera.fx * R / RANGE[0])
     except edges.EdgeError as e:

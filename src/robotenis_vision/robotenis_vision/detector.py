@@ -18,14 +18,12 @@ normals of that sphere's ellipse, with the blur estimated on the way (robotenis_
 Frames that cannot be trusted raise DetectionError with the reason: no sphere found, the ball
 touching the image border, too few outline points with contrast, too short an arc of outline.
 """
-from dataclasses import dataclass, field
-
 import numpy as np
 
-from robotenis_vision import conic, edges
+from robotenis_vision import baseline, conic, edges, paper_method
+from robotenis_vision.detection import Detection, DetectionError, RANGE
 
 METHODS = ('conic', 'paper', 'tangent', 'baseline')
-RANGE = (0.08, 1.2)            # m: distances at which a ball is looked for
 RAY_SPACING = 1.5              # px between profiles along the outline
 MIN_EDGE_POINTS = 16
 MIN_FRACTION = 0.4             # of the outline's profiles must find the edge with contrast
@@ -33,20 +31,6 @@ MIN_ARC = np.deg2rad(200)      # the outline points must cover this much of the 
 BLUR_GUESS = 1.0               # px: the first profiles' blur, before the frame's is estimated
 COARSE_TOLERANCE_PX = 1.0      # coarse (steepest-gradient) outline points agreeing with a sphere
 PRIOR_MIN_FRACTION = 0.6       # profiles that must find the edge near a prior's outline
-
-
-class DetectionError(ValueError):
-    """No trustworthy measurement in this image: the message gives the reason."""
-
-
-@dataclass
-class Detection:
-    position: np.ndarray        # (3,) sphere centre, optical frame, m
-    covariance: np.ndarray      # (3, 3), m^2
-    edge_points: np.ndarray     # (n, 2) outline points used, ideal pixels (camera.distort_pixels: image's)
-    fit_rms_px: float           # RMS distance of the points to the fitted outline, px
-    method: str
-    extra: dict = field(default_factory=dict)
 
 
 def check_image(image, camera):
@@ -77,7 +61,6 @@ def detect(image, camera, radius, method='conic', prior=None):
         raise ValueError(f'radius: must be positive, got {radius!r}')
     img = check_image(image, camera)
     if method == 'baseline':
-        from robotenis_vision import baseline
         return baseline.detect(img, camera, radius)
     try:
         ideal, fit, sigma, c0 = outline(img, camera, radius, prior)
@@ -88,7 +71,6 @@ def detect(image, camera, radius, method='conic', prior=None):
     xy = camera.to_normalized(ideal)
     weights = 1.0 / np.maximum(fit.sigma_e, 0.02) ** 2      # floored: no point outweighs the rest
     if method in ('paper', 'tangent'):
-        from robotenis_vision import paper_method
         c = _conic(xy, ideal, camera, radius, weights, c0).position
         _check_arc(ideal, camera.to_pixels(c[:2] / c[2]))
         det = paper_method.detect_from_outline(img, camera, radius, xy, sigma, _window(camera, c, radius, sigma),

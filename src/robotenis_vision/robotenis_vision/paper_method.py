@@ -27,6 +27,7 @@ coordinates"), so alpha = x_u / f and beta = y_u / f directly (eqs. 10, 14).
 import numpy as np
 
 from robotenis_vision import edges
+from robotenis_vision.detection import Detection, DetectionError
 
 ITERATIONS = 2
 MAX_SAG = 2e-4     # normalized (0.1 px at f = 500): how far a polygon side may cut inside the outline
@@ -161,7 +162,6 @@ def image_crossings(img, camera, xy, sigma, half_width, passes=2):
 def detect_from_outline(img, camera, R_B, xy, sigma, half_width, iterations=None):
     """A detector.Detection by the paper's method (``iterations`` of the ellipse correction: the
     paper's two by default, 0 for eqs. 9-16 alone); xy: the outline (normalized) that places the lines."""
-    from robotenis_vision.detector import Detection, DetectionError
     iterations = ITERATIONS if iterations is None else iterations
     try:
         centre, cross, sigma_cross = image_crossings(img, camera, xy, sigma, half_width)

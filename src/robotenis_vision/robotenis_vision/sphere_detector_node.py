@@ -1,42 +1,35 @@
-"""The `sphere_detector` node: the sphere's centre from the hand camera's images.
+"""
+The `sphere_detector` node: the sphere's centre from the hand camera's images.
 
-Subscribes /camera/image_raw (sensor_msgs/Image, mono8) and /camera/camera_info (sensor-data QoS);
-publishes /sphere/position (geometry_msgs/PointStamped, optical frame, m, stamp of the image) and
-/sphere/detection (robotenis_interfaces/SphereDetection: covariance, frames, edge points, fit RMS,
+Subscribes camera/image_raw (sensor_msgs/Image, mono8) and camera/camera_info (sensor-data QoS);
+publishes sphere/position (geometry_msgs/PointStamped, optical frame, m, stamp of the image) and
+sphere/detection (robotenis_interfaces/SphereDetection: covariance, frames, edge points, fit RMS,
 method). With ``frames`` > 1 it publishes the average of every ``frames`` detections (outliers
 rejected, robotenis_vision.averaging), stamped with the last image. A frame it cannot trust is
-dropped with the reason in a rate-limited log line.
-
-Parameters: method ('conic', 'paper', 'tangent', 'baseline'), radius (m; 0: from the robot
-description), description_path (default: the nominal description), frames (1), max_fit_rms_px
-(outline points farther than this from the fitted outline, RMS, make the frame untrusted),
-use_prior (true: the previous frame's detection, if it is the last frame's, seeds the next one:
-about half the time at rest; the detector searches the whole image when it does not fit).
+dropped with the reason in a rate-limited log line. Parameters: the table PARAMETERS.
 """
 import sys
 
-import numpy as np
 from geometry_msgs.msg import PointStamped
+import numpy as np
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
-from sensor_msgs.msg import CameraInfo, Image
-
 from robotenis_interfaces.msg import SphereDetection
 from robotenis_kinematics import description
-from robotenis_kinematics.ros import spin
+from robotenis_ros.convert import image_array, point_stamped
+from robotenis_ros.node import declare_parameters, spin
 from robotenis_vision import averaging, camera as camera_model, detector
+from sensor_msgs.msg import CameraInfo, Image
 
-ENCODINGS = ('mono8', '8UC1')
-
-
-def image_array(msg):
-    """The image of a mono8 sensor_msgs/Image as a (height, width) uint8 array; ValueError otherwise."""
-    if msg.encoding not in ENCODINGS:
-        raise ValueError(f"image encoding {msg.encoding!r} is not mono8")
-    if msg.step < msg.width or len(msg.data) < msg.step * msg.height:
-        raise ValueError(f'image data too short for {msg.width}x{msg.height} (step {msg.step}, {len(msg.data)} bytes)')
-    rows = np.frombuffer(bytes(msg.data), dtype=np.uint8, count=msg.step * msg.height).reshape(msg.height, msg.step)
-    return rows[:, :msg.width]
+PARAMETERS = {
+    'method': ('conic', f"one of {', '.join(detector.METHODS)}"),
+    'radius': (0.0, 'm: the sphere radius (0: from the robot description)'),
+    'description_path': (description.config_path('nominal.yaml'), 'the robot description YAML'),
+    'frames': (1, 'detections averaged per published measurement'),
+    'max_fit_rms_px': (0.5, 'px: an outline fit worse than this (RMS) makes the frame untrusted'),
+    'use_prior': (True, "the previous frame's detection seeds the next one (about half the time "
+                        'at rest); the whole image is searched when it does not fit'),
+}
 
 
 def detection_message(det, header, frames):
@@ -54,28 +47,24 @@ def detection_message(det, header, frames):
 class SphereDetectorNode(Node):
     def __init__(self):
         super().__init__('sphere_detector')
-        self.declare_parameter('method', 'conic')
-        self.declare_parameter('radius', 0.0)
-        self.declare_parameter('description_path', description.config_path('nominal.yaml'))
-        self.declare_parameter('frames', 1)
-        self.declare_parameter('max_fit_rms_px', 0.5)
-        self.declare_parameter('use_prior', True)
-        p = lambda name: self.get_parameter(name).value  # noqa: E731 - short accessor
-        self.method = p('method')
+        p = declare_parameters(self, PARAMETERS)
+        self.method = p['method']
         if self.method not in detector.METHODS:
-            raise ValueError(f"method must be one of {', '.join(detector.METHODS)}, got {self.method!r}")
-        self.radius = float(p('radius')) or description.load(p('description_path')).sphere_radius
-        self.frames = max(1, int(p('frames')))
-        self.max_rms = float(p('max_fit_rms_px'))
-        self.use_prior = bool(p('use_prior'))
+            raise ValueError(f"method must be one of {', '.join(detector.METHODS)}, "
+                             f'got {self.method!r}')
+        self.radius = float(p['radius']) or description.load(p['description_path']).sphere_radius
+        self.frames = max(1, int(p['frames']))
+        self.max_rms = float(p['max_fit_rms_px'])
+        self.use_prior = bool(p['use_prior'])
         self.prior = None
         self.camera = None
         self.camera_key = None
         self.batch = []
-        self.position_pub = self.create_publisher(PointStamped, '/sphere/position', 10)
-        self.detection_pub = self.create_publisher(SphereDetection, '/sphere/detection', 10)
-        self.create_subscription(CameraInfo, '/camera/camera_info', self.on_camera_info, qos_profile_sensor_data)
-        self.create_subscription(Image, '/camera/image_raw', self.on_image, qos_profile_sensor_data)
+        self.position_pub = self.create_publisher(PointStamped, 'sphere/position', 10)
+        self.detection_pub = self.create_publisher(SphereDetection, 'sphere/detection', 10)
+        self.create_subscription(CameraInfo, 'camera/camera_info', self.on_camera_info,
+                                 qos_profile_sensor_data)
+        self.create_subscription(Image, 'camera/image_raw', self.on_image, qos_profile_sensor_data)
         self.get_logger().info(f'sphere radius {self.radius * 1e3:.2f} mm, method {self.method}, '
                                f'{self.frames} frame(s) per measurement')
 
@@ -119,10 +108,7 @@ class SphereDetectorNode(Node):
 
     def publish(self, det, header, frames):
         header.frame_id = header.frame_id or 'camera_optical'
-        point = PointStamped()
-        point.header = header
-        point.point.x, point.point.y, point.point.z = (float(v) for v in det.position)
-        self.position_pub.publish(point)
+        self.position_pub.publish(point_stamped(det.position, header.stamp, header.frame_id))
         self.detection_pub.publish(detection_message(det, header, frames))
 
 

@@ -1,4 +1,4 @@
-"""detect() on images from two renderers: the independent OpenCV one (simple_render) and the simulator's.
+"""detect() on images of an independent OpenCV renderer (simple_render; the simulator's: robotenis_sim).
 
 Tolerances: an outline point is found to RESOLUTION_PX = 1/50 px on noise-free blurred discs
 (test_edges), so a noise-free centre is good to that over the ball's apparent radius along the line
@@ -10,7 +10,6 @@ import pytest
 from scipy.stats import chi2
 
 import simple_render
-from robotenis_sim import camera_model
 from robotenis_vision import camera as camera_model_vision
 from robotenis_vision import detector
 from robotenis_vision.detector import DetectionError
@@ -64,19 +63,6 @@ def test_scatter_and_bias_with_noise_match_the_covariance(c):
     tol_along, tol_across = tolerances(c)
     assert abs(along) < tol_along + 3 * sd_along
     assert across < tol_across + 3 * sd_across
-
-
-def test_simulator_render_at_200_mm_on_axis():
-    """Shading, highlight, gradient and textured background, blur and noise: still to the resolution."""
-    c = POSITIONS[0]
-    rng = np.random.default_rng(5)
-    dets = [detector.detect(camera_model.render(CAM, c, R, rng), CAM, R) for _ in range(10)]
-    errors = np.array([d.position for d in dets]) - c
-    P = np.mean([d.covariance for d in dets], axis=0)
-    along, across = split(errors.mean(axis=0), c)
-    tol_along, tol_across = tolerances(c)
-    assert abs(along) < tol_along + 3 * np.sqrt(P[2, 2] / 10)
-    assert across < tol_across + 3 * np.sqrt((P[0, 0] + P[1, 1]) / 10)
 
 
 @pytest.mark.parametrize('c', [POSITIONS[1], POSITIONS[4]])

@@ -1,0 +1,100 @@
+"""
+Every shipped launch file and parameter file names nodes and parameters that exist.
+
+A node's parameters are those of its module's table (``PARAMETERS``, robotenis_ros.node), found
+through the package's console script; a value must have the declared type (rclpy refuses an
+integer for a float parameter at start-up, and so would the node).
+"""
+import glob
+import importlib
+from importlib import metadata
+import os
+
+import pytest
+from robotenis_bringup import launch_file
+import yaml
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+LAUNCH_FILES = sorted(glob.glob(os.path.join(HERE, '..', 'launch', '*.launch.yaml')))
+PARAM_FILES = sorted(glob.glob(os.path.join(HERE, '..', 'config', '*.params.yaml')))
+BUILT_IN = {'use_sim_time': (False, 'every node')}
+ARGUMENTS = [{}, {'sim_time': 'true'}, {'namespace': 'robot1'}, {'sim': 'false'}]
+
+
+def table(package, executable):
+    """Return the parameter table of the node module behind a package's console script."""
+    scripts = {e.name: e.value for e in metadata.distribution(package).entry_points
+               if e.group == 'console_scripts'}
+    assert executable in scripts, f'{package} has no console script {executable!r}'
+    module = importlib.import_module(scripts[executable].split(':')[0])
+    return {**BUILT_IN, **module.PARAMETERS}
+
+
+def same_type(value, default):
+    """Whether rclpy would take ``value`` for a parameter declared with ``default``."""
+    if isinstance(default, list):
+        return isinstance(value, list) and all(same_type(v, default[0]) for v in value)
+    if isinstance(default, (bool, float, str)):
+        return type(value) is type(default)
+    return isinstance(default, int) and type(value) is int
+
+
+def check(node_name, parameters, known, where):
+    for name, value in parameters.items():
+        assert name in known, f'{where}: {node_name} has no parameter {name!r}'
+        assert same_type(value, known[name][0]), \
+            f'{where}: {node_name}.{name} = {value!r}, declared as {known[name][0]!r}'
+
+
+def loadable(path):
+    """Return the argument sets among ARGUMENTS that a launch file accepts."""
+    names = {a for a, _, _ in launch_file.arguments(path)}
+    return [args for args in ARGUMENTS if set(args) <= names]
+
+
+@pytest.mark.parametrize('path', LAUNCH_FILES, ids=os.path.basename)
+def test_every_node_and_parameter_of_a_launch_file_exists(path):
+    for args in loadable(path):
+        nodes = launch_file.load(path, args)
+        assert nodes, f'{path} {args}: starts no node'
+        for node in nodes:
+            check(node.name, node.parameters, table(node.package, node.executable),
+                  f'{os.path.basename(path)} {args}')
+            for file in node.param_files:
+                assert os.path.exists(file), f'{path}: {node.name} reads {file}, not there'
+            if args.get('namespace'):
+                assert node.namespace == args['namespace']
+
+
+@pytest.mark.parametrize('path', PARAM_FILES, ids=os.path.basename)
+def test_every_parameter_file_names_nodes_that_exist_and_their_parameters(path):
+    nodes = {n.name: n for f in LAUNCH_FILES for n in launch_file.load(f, loadable(f)[0])}
+    with open(path) as f:
+        data = yaml.safe_load(f)
+    for key, section in data.items():
+        name = key.split('/')[-1]
+        assert key in (name, f'/{name}', f'/**/{name}'), f'{path}: unexpected node key {key!r}'
+        assert name in nodes, f'{path}: no launch file starts a node {name!r}'
+        check(name, section['ros__parameters'], table(nodes[name].package, nodes[name].executable),
+              os.path.basename(path))
+
+
+def test_the_product_nodes_carry_no_simulator_fact():
+    """The ball's position reaches the calibration node from the launch configuration only."""
+    known = table('robotenis_calibration', 'calibration')
+    guess = known['sphere_guess'][0]
+    assert all(v != v for v in guess), f'sphere_guess defaults to {guess}, a position'
+
+
+def test_sim_time_puts_the_simulator_and_the_visual_loop_in_lockstep():
+    path = launch_file.find('tracking.launch.yaml')
+    nodes = {n.name: n.parameters for n in launch_file.load(path, {'sim_time': 'true'})}
+    assert nodes['sim_motors']['lockstep'] is True and nodes['hand_camera']['tick_on_effector']
+    assert nodes['motion_controller']['tick_on_joint_states'] is True
+    assert nodes['sim_motors']['camera_rate'] == 120.0
+    calibration = {n.name: n.parameters
+                   for n in launch_file.load(launch_file.find('calibration.launch.yaml'),
+                                             {'sim_time': 'true'})}
+    assert calibration['sim_motors']['camera_rate'] == 0.0 and 'pbvs_tracker' not in calibration
+    real = launch_file.load(launch_file.find('calibration.launch.yaml'), {'sim': 'false'})
+    assert {n.name for n in real} == {'sphere_detector', 'motion_controller', 'calibration'}

@@ -1,0 +1,60 @@
+"""
+Running a node: parameters declared from one table, and spinning with an ordered shutdown.
+
+Each node module keeps its parameters in one table,
+``PARAMETERS = {name: (default, description)}``, declared by ``declare_parameters``; launch files
+are checked against these tables (robotenis_bringup's tests).
+"""
+import sys
+
+from rcl_interfaces.msg import ParameterDescriptor
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, QoSProfile
+
+# A latched topic (the robot description): the last message reaches late subscribers too.
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def declare_parameters(node, table, **defaults):
+    """
+    Declare the parameters of ``table`` not declared yet on ``node``; return all their values.
+
+    ``defaults`` replace table defaults that the node works out at start (e.g. from a file that
+    an earlier declared parameter names).
+    """
+    for name, (default, text) in table.items():
+        if not node.has_parameter(name):
+            node.declare_parameter(name, defaults.get(name, default),
+                                   ParameterDescriptor(description=text))
+    return {name: node.get_parameter(name).value for name in table}
+
+
+def spin(make_node, name, fatal=(ValueError,), args=None, finish=None):
+    """
+    Run one node on a SingleThreadedExecutor until Ctrl-C or shutdown; return the exit code.
+
+    ``fatal`` errors raised while building the node (a bad parameter, an unreadable file) are
+    printed as ``name: message`` and give exit code 2. Shutdown goes in the order rclpy needs:
+    executor, ``finish(node)`` (e.g. close a file the node writes), node, context.
+    """
+    rclpy.init(args=args)
+    node = None
+    executor = SingleThreadedExecutor()
+    try:
+        node = make_node()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except fatal as e:
+        print(f'{name}: {e}', file=sys.stderr)
+        return 2
+    finally:
+        executor.shutdown()
+        if node is not None:
+            if finish is not None:
+                finish(node)
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
