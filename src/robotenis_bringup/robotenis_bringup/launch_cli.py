@@ -12,6 +12,7 @@ with every node still running until then; non-zero, naming it, if a node died.
 """
 import argparse
 import os
+import shlex
 import sys
 
 from robotenis_bringup import launch_file
@@ -60,7 +61,7 @@ def main(argv=None):
     prefix = os.path.join(top, 'install')
     if args.print:
         for node in nodes:
-            print(' '.join(node.command(prefix)))
+            print(shlex.join(node.command(prefix)))
         return 0
     launcher = Launcher(nodes, prefix, os.path.join(top, 'log', 'launch'))
     try:

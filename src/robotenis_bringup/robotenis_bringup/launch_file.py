@@ -6,18 +6,21 @@ ROS 2 YAML launch files, read as ``ros2 launch`` reads them, into the node proce
 the launch_yaml format that this project's launch files use, and refuses anything else by name:
 
 * ``arg`` (``name``, ``default``, ``description``), ``let`` (``name``, ``value``);
-* ``include`` (``file``, ``arg``: a list of ``name``/``value``); the included file sees the
-  arguments given on the command line and the including file's, overridden by those the include
-  passes, and the command line may set the arguments it declares;
+* ``include`` (``file``, ``arg``: a list of ``name``/``value``). Launch arguments are global, as
+  in Jazzy's launch: the command line sets them first, an ``arg`` gives its default only to one not
+  set yet, an include sets those it passes before reading its file, and what the included file sets
+  stays set after it;
 * ``node`` (``pkg``, ``exec``, ``name``, ``namespace``, ``param``: ``name``/``value`` pairs or
   ``from`` a parameter file, ``remap``: ``from``/``to`` pairs, ``output`` is accepted and ignored);
 * ``if`` / ``unless`` on any of them ("true", "false", "1" or "0" once substituted);
 * substitutions ``$(var NAME)``, ``$(find-pkg-share PACKAGE)``, ``$(env NAME [DEFAULT])`` and
   ``$(dirname)`` (the folder of the file being read).
 
-A parameter value written as a string is typed as launch_ros types it: the string, once
-substituted, is read as YAML ("0.5" is a float, "4" an integer, "true" a bool, "[1.0, 2.0]" a
-list), so a float parameter must be given as "4.0".
+A parameter value is typed as launch_ros types it: a YAML number, bool, string or list is taken
+as it is (a quoted '4.0' stays a string), and text with a substitution is read as YAML once
+substituted ("$(var rate)" giving 0.5 is a float, 4 an integer, true a bool, [1.0, 2.0] a list),
+so a float parameter must be written 4.0, not 4. Unlike ros2 launch, which ignores them, an
+argument given that no file declares is refused (a typo would otherwise go unnoticed).
 """
 from dataclasses import dataclass, field
 import os
@@ -102,7 +105,7 @@ def load(path, args=None):
 
     """
     given = {k: str(v) for k, v in (args or {}).items()}
-    context = {'file': os.path.abspath(path), 'vars': {}, 'given': given, 'declared': set()}
+    context = {'file': os.path.abspath(path), 'vars': dict(given), 'declared': set()}
     nodes = _read(context)
     unknown = sorted(set(given) - context['declared'])
     if unknown:
@@ -180,9 +183,7 @@ def _active(body, context, where):
 def _declare(body, context, where):
     name = body.get('name')
     context['declared'].add(name)
-    if name in context['given']:
-        context['vars'][name] = context['given'][name]
-    elif name not in context['vars']:
+    if name not in context['vars']:
         if 'default' not in body:
             raise LaunchFileError(f'{where}: launch argument {name!r} is required '
                                   f'(give {name}:=...)')
@@ -192,13 +193,11 @@ def _declare(body, context, where):
 def _include(body, context, where):
     path = _text(body['file'], context, where)
     passed = {a['name']: _text(a['value'], context, where) for a in body.get('arg') or []}
-    inner = {'file': os.path.abspath(path), 'vars': dict(context['vars']),
-             'given': {**context['given'], **passed}, 'declared': set()}
-    if not os.path.exists(inner['file']):
+    if not os.path.exists(path):
         raise LaunchFileError(f'{where}: included file {path} does not exist')
-    nodes = _read(inner)
-    context['declared'] |= inner['declared']
-    return nodes
+    context['vars'].update(passed)
+    inner = {**context, 'file': os.path.abspath(path)}     # the same arguments and declarations
+    return _read(inner)
 
 
 def _node(body, context, where):
@@ -223,17 +222,17 @@ def _node(body, context, where):
 
 
 def _typed(value, context, where):
-    """Return a parameter value, strings substituted and read as YAML (launch_ros' typing)."""
+    """Return a parameter value typed as launch_ros types it (see the module docstring)."""
     if isinstance(value, list):
         return [_typed(v, context, where) for v in value]
-    if isinstance(value, str):
-        text = _text(value, context, where)
-        try:
-            typed = yaml.safe_load(text)
-        except yaml.YAMLError:
-            return text
-        return text if typed is None or isinstance(typed, dict) else typed
-    return value
+    if not isinstance(value, str) or not SUBSTITUTION.search(value):
+        return value
+    text = _text(value, context, where)
+    try:
+        typed = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+    return text if typed is None or isinstance(typed, dict) else typed
 
 
 def _text(value, context, where):

@@ -28,7 +28,8 @@ def files(tmp_path, monkeypatch):
             param:
             - from: $(dirname)/p.yaml
             - {name: rate, value: $(var rate)}
-            - {name: count, value: '4'}
+            - {name: count, value: 4}
+            - {name: quoted, value: '4.0'}
             - {name: fast, value: $(var fast)}
             - {name: guess, value: [0.5, '$(var rate)']}
             - {name: label, value: $(env ROBOTENIS_TEST_VALUE)}
@@ -45,7 +46,7 @@ def files(tmp_path, monkeypatch):
             arg:
             - {name: rate, value: $(var rate)}
             - {name: fast, value: $(var fast)}
-        - node: {pkg: q, exec: other, unless: $(var fast)}
+        - node: {pkg: q, exec: other, unless: $(var fast), param: [{name: ns, value: $(var ns)}]}
         """)
 
 
@@ -53,13 +54,15 @@ def test_arguments_includes_conditions_and_typed_values(files):
     inner, slow = launch_file.load(files)
     assert (inner.name, inner.package, inner.executable) == ('inner', 'p', 'e')
     assert inner.namespace == ''
-    assert inner.parameters == {'rate': 250.0, 'count': 4, 'fast': True, 'guess': [0.5, 250.0],
-                                'label': 'from-env'}
+    assert inner.parameters == {'rate': 250.0, 'count': 4, 'quoted': '4.0', 'fast': True,
+                                'guess': [0.5, 250.0], 'label': 'from-env'}
     assert inner.param_files == [str(files.parent / 'p.yaml')] and inner.remaps == [('a', 'b')]
     assert slow.name == 'slow'                       # no name: the executable's
     nodes = launch_file.load(files, {'fast': 'false', 'ns': 'robot1'})
     assert [n.name for n in nodes] == ['inner', 'other']
     assert nodes[0].namespace == 'robot1' and nodes[0].parameters['fast'] is False
+    # arguments are global, as in Jazzy: the included file's ns is seen after the include
+    assert nodes[1].parameters == {'ns': 'robot1'}
     assert launch_file.arguments(files) == [('fast', 'true', 'go fast')]
 
 
