@@ -1,5 +1,7 @@
-"""`./robotenis demo`: a calibration of the simulated RoboTenis, printed beside the paper's Table 1,
-then the residual loop on a robot with an effect nobody declared.
+"""
+`./robotenis demo`: calibrate the simulated RoboTenis, print the result beside the paper's Table 1.
+
+Then run the residual loop on a robot with an effect nobody declared.
 
 Part 1. The simulator's truth is Table 1's calibrated column. The planner draws the paper's
 calibration poses (random, 5-10 cm from a singularity) among those where the hand camera should see
@@ -12,10 +14,11 @@ residual loop: it finds and names the effect, and prints the held-out errors bef
 result (a calibrated description with its effects and report) and the residual plots go to --out.
 
 Part 3. The whole system through ROS: the nodes (simulated motors and hand camera with the backlash
-in their truth, sphere detector, motion controller, calibration service) start as separate processes
-on the simulator's clock; the demo calls the Calibrate service as `./robotenis calibrate --call`
-would, with a progress bar, and the service records the session to a bag under --out, finds the
-rests, averages the detections, identifies and runs the residual loop. ``--offline`` skips part 3.
+in their truth, sphere detector, motion controller, calibration service) start as separate
+processes on the simulator's clock; the demo calls the Calibrate service as
+`./robotenis calibrate --call` would, with a progress bar, and the service records the session to a
+bag under --out, finds the rests, averages the detections, identifies and runs the residual loop.
+``--offline`` skips part 3.
 """
 import argparse
 import os
@@ -36,25 +39,27 @@ import yaml
 
 
 def human(name, value):
-    """mm for lengths, degrees for angles."""
+    """Return mm for lengths, degrees for angles."""
     return np.degrees(value) if name.startswith('theta') else value * 1e3
 
 
 def parameter_table(names, fit):
-    rows = ['%-8s %10s %22s %14s  %s' % ('param', 'nominal', 'identified +- std', 'Table 1 cal.', 'unit')]
+    header = ('param', 'nominal', 'identified +- std', 'Table 1 cal.', 'unit')
+    rows = ['%-8s %10s %22s %14s  %s' % header]
     for j, n in enumerate(names):
         if n.startswith('P0'):
             continue  # the camera reference here, not Table 1's home position (see the note below)
         rows.append('%-8s %10.3f %13.4f +- %6.4f %14.3f  %s' % (
-            n, paper.TABLE1_NOMINAL[j], human(n, fit.U[j]), human(n, fit.std[j]), paper.TABLE1_CALIBRATED[j],
-            'deg' if n.startswith('theta') else 'mm'))
+            n, paper.TABLE1_NOMINAL[j], human(n, fit.U[j]), human(n, fit.std[j]),
+            paper.TABLE1_CALIBRATED[j], 'deg' if n.startswith('theta') else 'mm'))
     return '\n'.join(rows)
 
 
 def identification(nominal, truth, args):
     """Part 1: identification beside Table 1, and the observability analysis."""
     noise = synthetic.NoiseModel()
-    print(f'1. a static session of {args.poses} planned poses (5-10 cm from a singularity, ball in view); '
+    print(f'1. a static session of {args.poses} planned poses '
+          '(5-10 cm from a singularity, ball in view); '
           f'noise: resolvers {noise.sigma_resolver:.0e} rad, camera (Table 3) '
           + ', '.join(f'{s * 1e3:.4f}' for s in noise.sigma_camera) + ' mm')
     session, meas, _ = study.static_run(truth, nominal, args.poses, args.seed)
@@ -65,10 +70,13 @@ def identification(nominal, truth, args):
     t = time.perf_counter()
     paper_fit = idf.gauss_newton_paper(start, meas)
     t_gn = time.perf_counter() - t
-    print(f'2. {len(session)} rests measured; identification of 15 parameters from the nominal start:')
-    print(f'   Levenberg-Marquardt, whitened (default): {fit.iterations} iterations, {t_lm * 1e3:.1f} ms, '
+    print(f'2. {len(session)} rests measured; '
+          'identification of 15 parameters from the nominal start:')
+    print(f'   Levenberg-Marquardt, whitened (default): {fit.iterations} iterations, '
+          f'{t_lm * 1e3:.1f} ms, '
           f'chi2/dof = {fit.chi2 / fit.dof:.3f}')
-    print(f'   Gauss-Newton with pseudo-inverse (paper eq. 8): {paper_fit.iterations} iterations, {t_gn * 1e3:.1f} ms')
+    print(f'   Gauss-Newton with pseudo-inverse (paper eq. 8): {paper_fit.iterations} iterations, '
+          f'{t_gn * 1e3:.1f} ms')
     print()
     print(parameter_table(idf.PAPER_PARAMETERS, fit))
     legs = [j for j, n in enumerate(idf.PAPER_PARAMETERS) if not n.startswith('P0')]
@@ -76,12 +84,14 @@ def identification(nominal, truth, args):
     e = fit.U[legs] - truth_U
     cov = fit.covariance[np.ix_(legs, legs)]
     print()
-    print('Scored against the simulator truth (Table 1 geometry): Mahalanobis distance of the error %.1f '
+    print('Scored against the simulator truth (Table 1 geometry): '
+          'Mahalanobis distance of the error %.1f '
           '(chi2 with %d dof: 99 %% below %.1f)' % (e @ np.linalg.solve(cov, e), len(legs), 26.2))
     home = delta.forward(fit.model.desc, fit.model.desc.theta0) * 1e3
     table_home = delta.forward(truth.geometry, truth.geometry.theta0) * 1e3
     print('Home position FK(theta0) of the identified model: (%.2f, %.2f, %.2f) mm.' % tuple(home))
-    print('Note: Table 1 lists P0 = (5.31, 0.31, 743.74) mm, but its own a, b, h, theta0 put home at\n'
+    print('Note: Table 1 lists P0 = (5.31, 0.31, 743.74) mm, '
+          'but its own a, b, h, theta0 put home at\n'
           '(%.2f, %.2f, %.2f) mm: the table is not self-consistent in P0.' % tuple(table_home))
     print()
     print(observability.format_report(observability.analyse(fit.model, meas)))
@@ -90,18 +100,21 @@ def identification(nominal, truth, args):
 def residual_loop(nominal, truth, args):
     """Part 2: a session on a robot with an undeclared effect, through the residual loop."""
     truth = sim_truth.with_effects(truth, **scenarios.EFFECTS['backlash'])  # what nobody declared
-    print(f'3. residual loop: the robot now has an undeclared effect; the ball position is known to '
+    print('3. residual loop: the robot now has an undeclared effect; '
+          'the ball position is known to '
           f'{np.linalg.norm(scenarios.BALL_GUESS_ERROR) * 1e3:.0f} mm')
     t = time.perf_counter()
     session, meas, d = study.static_run(truth, nominal, args.poses, args.seed + 1)
-    print(f'   {len(session)} rests measured, {len(d.holdout)} held out; planning, simulation, identification '
+    print(f'   {len(session)} rests measured, {len(d.holdout)} held out; '
+          'planning, simulation, identification '
           f'and diagnosis: {(time.perf_counter() - t) * 1e3:.0f} ms')
     for line in result.summary(d):
         print('   ' + line)
     os.makedirs(args.out, exist_ok=True)
     path = os.path.join(args.out, 'result.yaml')
     description.save(result.calibrated_description(d, nominal), path)
-    result.plot_residuals(d, meas, session.sphere, session.stamps, os.path.join(args.out, 'residuals.png'))
+    plot_path = os.path.join(args.out, 'residuals.png')
+    result.plot_residuals(d, meas, session.sphere, session.stamps, plot_path)
     print(f'   wrote {path} and residuals.png (try: ./robotenis fk --model {path})')
 
 
@@ -146,9 +159,11 @@ def main(argv=None):
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--poses', type=int, default=300)
     parser.add_argument('--seed', type=int, default=1)
-    parser.add_argument('--out', default='report/demo', help='folder for result.yaml, residuals.png and the bag')
+    parser.add_argument('--out', default='report/demo',
+                        help='folder for result.yaml, residuals.png and the bag')
     parser.add_argument('--offline', action='store_true', help='parts 1 and 2 only (no ROS)')
-    parser.add_argument('--ros-poses', type=int, default=90, help='poses of the session through ROS')
+    parser.add_argument('--ros-poses', type=int, default=90,
+                        help='poses of the session through ROS')
     parser.add_argument('--frames', type=int, default=30, help='camera frames averaged per pose')
     parser.add_argument('--settle', type=float, default=0.3, help='settle time at each pose (s)')
     args = parser.parse_args(argv)

@@ -1,9 +1,10 @@
-"""How much a wrong Jacobian changes the visual servoing command (calibration paper, section 6.2.1).
+"""
+How much a wrong Jacobian changes the visual servoing command (calibration paper, section 6.2.1).
 
-With the robot's Jacobian J_RC taken as the calibrated one and the controller using J_RN (eq. 27-28),
-the command error is Delta u_r = J_RC (J_RN^-1 - J_RC^-1) v; its largest singular value bounds the
-relative error for any velocity v. The paper mapped it over a cylinder of radius 300 mm and height
-400 mm and found about 0.015.
+With the robot's Jacobian J_RC taken as the calibrated one and the controller using J_RN
+(eq. 27-28), the command error is Delta u_r = J_RC (J_RN^-1 - J_RC^-1) v; its largest singular
+value bounds the relative error for any velocity v. The paper mapped it over a cylinder of radius
+300 mm and height 400 mm and found about 0.015.
 """
 import numpy as np
 
@@ -21,7 +22,7 @@ def largest_singular_value(real, used, P):
 
 
 def planes(real, used, n=61):
-    """sigma_max on the vertical planes y = 0 and x = 0 through the cylinder: (s, z, map_xz, map_yz)."""
+    """Map sigma_max on the cylinder's vertical planes y = 0, x = 0: (s, z, map_xz, map_yz)."""
     s = np.linspace(-RADIUS, RADIUS, n)
     z = np.linspace(*Z_RANGE, n)
     S, Z = np.meshgrid(s, z, indexing='ij')
@@ -42,8 +43,8 @@ def cylinder(real, used, n_angle=73, n_z=41):
 
 def volume_max(real, used, n=21):
     """Largest and median sigma_max over a grid filling the cylinder."""
-    r, a, z = np.meshgrid(np.linspace(0, RADIUS, n), np.linspace(0, 2 * np.pi, 3 * n), np.linspace(*Z_RANGE, n),
-                          indexing='ij')
+    r, a, z = np.meshgrid(np.linspace(0, RADIUS, n), np.linspace(0, 2 * np.pi, 3 * n),
+                          np.linspace(*Z_RANGE, n), indexing='ij')
     P = np.stack([r * np.cos(a), r * np.sin(a), z], axis=-1).reshape(-1, 3)
     sigma = largest_singular_value(real, used, P)
     return float(sigma.max()), float(np.median(sigma))
@@ -59,9 +60,10 @@ def plot(real, used, path, title):
     angle, zc, surf = cylinder(real, used)
     vmax = max(xz.max(), yz.max(), surf.max())
     fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
-    for ax, (x, y, m, label) in zip(axes, [(s * 1e3, z * 1e3, xz, 'plane y = 0: x (mm)'),
-                                           (s * 1e3, z * 1e3, yz, 'plane x = 0: y (mm)'),
-                                           (np.degrees(angle), zc * 1e3, surf, 'cylinder r = 300 mm: angle (deg)')]):
+    maps = [(s * 1e3, z * 1e3, xz, 'plane y = 0: x (mm)'),
+            (s * 1e3, z * 1e3, yz, 'plane x = 0: y (mm)'),
+            (np.degrees(angle), zc * 1e3, surf, 'cylinder r = 300 mm: angle (deg)')]
+    for ax, (x, y, m, label) in zip(axes, maps):
         im = ax.pcolormesh(x, y, m.T, shading='auto', vmin=0, vmax=vmax, cmap='viridis')
         ax.set_xlabel(label)
         ax.set_ylabel('z (mm, down)')

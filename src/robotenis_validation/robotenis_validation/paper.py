@@ -1,4 +1,4 @@
-"""The calibration paper's reference numbers, to print beside ours (mm, degrees as in the paper)."""
+"""The calibration paper's reference numbers to print beside ours (mm, degrees as in the paper)."""
 import numpy as np
 from robotenis_kinematics import description
 

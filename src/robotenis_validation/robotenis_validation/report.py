@@ -1,10 +1,12 @@
-"""`./robotenis report [--session BAG_DIR] [--quick]`: the validation report, report/index.html.
+"""
+`./robotenis report [--session BAG_DIR] [--quick]`: the validation report, report/index.html.
 
-Every number in it is computed by this run, from the simulator: the identification beside the paper's
-Table 1, the observability analysis, the residual loop on robots with each undeclared effect (errors
-before and after on held-out poses), pose selection, the Jacobian study of section 6.2.1, the ISO 9283
-static tests of section 6.1 (nominal, plain-calibrated and final models) and the tracking tests of
-section 6.2.2. ``--session`` adds the calibration of a recorded bag.
+Every number in it is computed by this run, from the simulator: the identification beside the
+paper's Table 1, the observability analysis, the residual loop on robots with each undeclared
+effect (errors before and after on held-out poses), pose selection, the Jacobian study of
+section 6.2.1, the ISO 9283 static tests of section 6.1 (nominal, plain-calibrated and final
+models) and the tracking tests of section 6.2.2. ``--session`` adds the calibration of a
+recorded bag.
 ``--quick`` uses fewer poses and seeds (for CI: under 3 minutes).
 """
 import argparse
@@ -16,22 +18,22 @@ import time
 import numpy as np
 
 from robotenis_calibration import result
-from robotenis_validation import iso_study, jacobian_study, paper
-from robotenis_validation import tracking_study as ts
-from robotenis_validation.demo import human
-from robotenis_validation import study
-from robotenis_sim.scenarios import EFFECTS as STUDY
 from robotenis_kinematics import description, observability
 from robotenis_kinematics import identification as idf
 from robotenis_sim import motors, truth as sim_truth
+from robotenis_sim.scenarios import EFFECTS as STUDY
+from robotenis_validation import iso_study, jacobian_study, paper
+from robotenis_validation import study
+from robotenis_validation import tracking_study as ts
+from robotenis_validation.demo import human
 from robotenis_vision import camera as vision_camera
 
 
-
 def table(header, rows):
-    """An HTML table from a header and rows of cells (strings or numbers)."""
+    """Build an HTML table from a header and rows of cells (strings or numbers)."""
     head = ''.join(f'<th>{html.escape(str(h))}</th>' for h in header)
-    body = ''.join('<tr>' + ''.join(f'<td>{html.escape(str(c))}</td>' for c in row) + '</tr>' for row in rows)
+    body = ''.join('<tr>' + ''.join(f'<td>{html.escape(str(c))}</td>' for c in row) + '</tr>'
+                   for row in rows)
     return f'<table><tr>{head}</tr>{body}</table>'
 
 
@@ -46,10 +48,13 @@ def section_identification(nominal, truth, n, seed):
         rows.append([name, f'{paper.TABLE1_NOMINAL[j]:.3f}', f'{human(name, fit.U[j]):.4f}',
                      f'{human(name, fit.std[j]):.4f}', f'{paper.TABLE1_CALIBRATED[j]:.3f}', unit])
     obs = observability.analyse(fit.model, meas)
-    text = (f'<p>{len(s)} rests of a static session (poses 5-10 cm from a singularity that the camera sees); '
-            f'chi2/dof of the fit {fit.chi2 / fit.dof:.3f}. The simulator\'s truth is Table 1\'s calibrated column, '
+    text = (f'<p>{len(s)} rests of a static session '
+            '(poses 5-10 cm from a singularity that the camera sees); '
+            f'chi2/dof of the fit {fit.chi2 / fit.dof:.3f}. '
+            "The simulator's truth is Table 1's calibrated column, "
             'so the identified values should agree with it within a few standard deviations.</p>')
-    text += table(['parameter', 'nominal (Table 1)', 'identified', 'std', 'calibrated (Table 1)', 'unit'], rows)
+    text += table(['parameter', 'nominal (Table 1)', 'identified', 'std', 'calibrated (Table 1)',
+                   'unit'], rows)
     text += '<h3>Observability (QR with column pivoting, units 1 mm / 1 mrad)</h3><pre>' + \
         html.escape(observability.format_report(obs)) + '</pre>'
     return text, fit
@@ -60,7 +65,8 @@ def section_residual_loop(nominal, truth, n, seeds, out_dir):
     for name, effect in STUDY.items():
         found, errors = [], []
         for seed in range(seeds):
-            s, meas, d = study.static_run(sim_truth.with_effects(truth, **effect), nominal, n, 100 + seed)
+            s, meas, d = study.static_run(sim_truth.with_effects(truth, **effect), nominal, n,
+                                          100 + seed)
             found.append(d.effects)
             errors.append([d.errors_mm['nominal'], d.errors_mm['plain'], d.errors_mm['final']])
             if name == 'backlash' and plot is None:
@@ -70,11 +76,13 @@ def section_residual_loop(nominal, truth, n, seeds, out_dir):
         named = sum(f == ([name] if effect else []) for f in found)
         e = np.mean(errors, axis=0)
         rows.append([name, f'{named}/{seeds}', f'{e[0]:.3f}', f'{e[1]:.3f}', f'{e[2]:.3f}'])
-    text = ('<p>Each row: a robot whose truth carries one effect that the declared description does not; '
-            f'{seeds} sessions of {n} planned poses each, 30 % of the rests held out. "named" counts the sessions '
-            'where the loop found exactly that effect (for "none": claimed nothing). Errors are the held-out RMS '
-            '3D distances between where each model puts the effector and where the camera saw it.</p>')
-    text += table(['undeclared effect', 'named', 'nominal (mm)', 'plain 15-parameter (mm)', 'final (mm)'], rows)
+    text = ('<p>Each row: a robot whose truth carries one effect that the declared description '
+            f'does not; {seeds} sessions of {n} planned poses each, 30 % of the rests held out. '
+            '"named" counts the sessions where the loop found exactly that effect (for "none": '
+            'claimed nothing). Errors are the held-out RMS 3D distances between where each model '
+            'puts the effector and where the camera saw it.</p>')
+    text += table(['undeclared effect', 'named', 'nominal (mm)', 'plain 15-parameter (mm)',
+                   'final (mm)'], rows)
     text += f'<h3>One session with backlash, step by step</h3><pre>{html.escape(loop_text)}</pre>'
     text += f'<p><img src="{plot}" width="100%"></p>'
     return text
@@ -93,12 +101,13 @@ def section_pose_selection(nominal, truth, n, seeds):
             errors.append(d.errors_mm['plain'])
         rows.append([selection, f'{np.mean(rests):.0f}', f'{np.mean(lengths) * 1e3:.4f}',
                      f'{np.degrees(np.mean(angles)):.5f}', f'{np.mean(errors):.4f}'])
-    return ('<p>The paper draws its poses at random 5-10 cm from a singularity ("boundary"); the optimal design '
-            'picks, among poses where the camera should see the ball, those that most increase the log-determinant '
-            f'of the 15 parameters\' information matrix (D-optimality). {n} planned poses, {seeds} sessions each; '
-            'the plain 15-parameter model.</p>' +
-            table(['selection', 'rests measured', 'mean std of a, b, h (mm)', 'mean std of theta0 (deg)',
-                   'held-out RMS error (mm)'], rows))
+    return ('<p>The paper draws its poses at random 5-10 cm from a singularity ("boundary"); '
+            'the optimal design picks, among poses where the camera should see the ball, those '
+            'that most increase the log-determinant '
+            "of the 15 parameters' information matrix (D-optimality). "
+            f'{n} planned poses, {seeds} sessions each; the plain 15-parameter model.</p>' +
+            table(['selection', 'rests measured', 'mean std of a, b, h (mm)',
+                   'mean std of theta0 (deg)', 'held-out RMS error (mm)'], rows))
 
 
 def section_jacobian(nominal, fit, out_dir):
@@ -106,10 +115,13 @@ def section_jacobian(nominal, fit, out_dir):
     peak, median = jacobian_study.volume_max(calibrated, nominal)
     jacobian_study.plot(calibrated, nominal, os.path.join(out_dir, 'jacobian.png'),
                         'largest singular value of J_RC (J_RN^-1 - J_RC^-1)')
-    return (f'<p>Over the cylinder of radius 300 mm and height 400 mm (z from {jacobian_study.Z_RANGE[0] * 1e3:.0f} '
-            f'to {jacobian_study.Z_RANGE[1] * 1e3:.0f} mm): largest singular value {peak:.4f} at most, median '
-            f'{median:.4f}; the paper found about {paper.JACOBIAN_MAX}. At 2000 mm/s of command this is at most '
-            f'{peak * 2000:.1f} mm/s of difference between the nominal and the calibrated control law.</p>'
+    return ('<p>Over the cylinder of radius 300 mm and height 400 mm '
+            f'(z from {jacobian_study.Z_RANGE[0] * 1e3:.0f} '
+            f'to {jacobian_study.Z_RANGE[1] * 1e3:.0f} mm): '
+            f'largest singular value {peak:.4f} at most, median {median:.4f}; '
+            f'the paper found about {paper.JACOBIAN_MAX}. At 2000 mm/s of command this is at most '
+            f'{peak * 2000:.1f} mm/s of difference between the nominal and the calibrated control '
+            'law.</p>'
             '<p><img src="jacobian.png" width="100%"></p>')
 
 
@@ -125,7 +137,11 @@ ISO_EFFECT = 'joint_scale'   # the undeclared effect of the robot the static tes
 
 
 def section_static(nominal, truth, n, quick, out_dir, say):
-    """Section 6.1 on a robot whose truth carries an undeclared gear error: Table 4 and Figures 9-10."""
+    """
+    Report section 6.1 on a robot whose truth carries an undeclared gear error.
+
+    Table 4 and Figures 9-10.
+    """
     robot = sim_truth.with_effects(truth, **STUDY[ISO_EFFECT])
     _, _, d = study.static_run(robot, nominal, n, 7)
     models = {'nominal': nominal, 'plain 15-parameter': d.plain.model.desc,
@@ -133,7 +149,8 @@ def section_static(nominal, truth, n, quick, out_dir, say):
     plate = iso_study.Plate.in_front_of(iso_study.CUBE_CENTRE, robot.camera_translation
                                         + iso_study.STANDOFF * robot.camera_rotation[:, 2])
     # the user sets the plates by eye and knows the camera offset from the drawings to 5 mm
-    offset_guess = robot.camera_translation + iso_study.STANDOFF * robot.camera_rotation[:, 2] + 0.005
+    offset_guess = (robot.camera_translation + iso_study.STANDOFF * robot.camera_rotation[:, 2]
+                    + 0.005)
     repetitions, loops, rendered_repetitions = (3, 3, 1) if quick else (25, 25, 25)
     maps = {}
     for name, desc in models.items():
@@ -144,57 +161,65 @@ def section_static(nominal, truth, n, quick, out_dir, say):
     rendered = {}
     for name, desc in models.items():
         say(f'distance accuracy with the {name} model, circles rendered and measured')
-        rendered[name] = iso_study.distance_accuracy(robot, desc, plate, offset_guess, rendered_repetitions,
-                                                     np.random.default_rng(13), say, camera=vision_camera.default())
+        rendered[name] = iso_study.distance_accuracy(robot, desc, plate, offset_guess,
+                                                     rendered_repetitions,
+                                                     np.random.default_rng(13), say,
+                                                     camera=vision_camera.default())
     iso_study.plot_maps(rendered, plate, os.path.join(out_dir, 'distance_accuracy_rendered.png'))
     paper_mean = paper.DISTANCE_ACCURACY_MEAN
-    ad_rows = [[name, f'{AD.mean() * 1e3:.4f}', f'{AD.max() * 1e3:.4f}', f'{rendered[name].mean() * 1e3:.4f}',
+    ad_rows = [[name, f'{AD.mean() * 1e3:.4f}', f'{AD.max() * 1e3:.4f}',
+                f'{rendered[name].mean() * 1e3:.4f}',
                 f'{paper_mean["nominal"] if name == "nominal" else paper_mean["calibrated"]:.3f}']
                for name, AD in maps.items()]
     rp_rows = []
     for speed in (1.0, 2.0):
         say(f'repeatability: five-point loop at {speed} m/s')
-        samples = iso_study.repeatability(robot, motors.true_masses(robot), models['final (residual loop)'],
+        samples = iso_study.repeatability(robot, motors.true_masses(robot),
+                                          models['final (residual loop)'],
                                           speed, loops, np.random.default_rng(12))
         ranges, RP = iso_study.repeatability_figures(samples)
         paper_ranges, paper_RP = paper.TABLE4[speed]
-        rp_rows.append([f'{speed:.1f}', ', '.join(f'{v * 1e3:.3f}' for v in ranges), f'{RP * 1e3:.4f}',
+        rp_rows.append([f'{speed:.1f}', ', '.join(f'{v * 1e3:.3f}' for v in ranges),
+                        f'{RP * 1e3:.4f}',
                         ', '.join(f'{v:.3f}' for v in paper_ranges), f'{paper_RP:.4f}'])
-    return (f'<p>The robot\'s truth carries an undeclared gear error ({ISO_EFFECT}: '
-            f'{STUDY[ISO_EFFECT][ISO_EFFECT]}); the plain and final models are calibrated from one static session '
-            f'of {n} planned poses. The camera servoes to 200 mm in front of each circle of the plate (25 circles, '
-            '40 mm, 100 mm apart) in five vertical planes 100 mm apart, until the circle is centred to under a '
-            'pixel (0.4 mm); its position is the forward kinematics of the readings corrected by the averaged '
-            f'visual measurement (Table 3 noise). {repetitions} repetitions of the whole plate per model. '
-            'In the fourth column (and the second set of maps) the camera renders the plate through the true '
-            f'mounting, one frame per visit, {rendered_repetitions} repetition(s), and robotenis_vision.circle '
-            'measures the circle from its ink coverage. '
-            'AD of each pair of neighbouring circles against their 100 mm (ISO 9283 appendix); each circle shows '
-            'the mean of its pairs. The paper\'s figures are for its real robot, calibrated by the paper\'s '
-            'method.</p>' +
+    return (f"<p>The robot's truth carries an undeclared gear error ({ISO_EFFECT}: "
+            f'{STUDY[ISO_EFFECT][ISO_EFFECT]}); the plain and final models are calibrated from '
+            f'one static session of {n} planned poses. The camera servoes to 200 mm in front of '
+            'each circle of the plate (25 circles, 40 mm, 100 mm apart) in five vertical planes '
+            '100 mm apart, until the circle is centred to under a pixel (0.4 mm); its position is '
+            'the forward kinematics of the readings corrected by the averaged visual measurement '
+            f'(Table 3 noise). {repetitions} repetitions of the whole plate per model. '
+            'In the fourth column (and the second set of maps) the camera renders the plate '
+            f'through the true mounting, one frame per visit, {rendered_repetitions} '
+            'repetition(s), and robotenis_vision.circle measures the circle from its ink '
+            'coverage. AD of each pair of neighbouring circles against their 100 mm '
+            '(ISO 9283 appendix); each circle shows the mean of its pairs. '
+            "The paper's figures are for its real robot, calibrated by the paper's method.</p>" +
             table(['model', 'mean AD (mm)', 'largest (mm)', 'mean AD, rendered circles (mm)',
                    'paper, mean (mm)'], ad_rows) +
             '<p><img src="distance_accuracy.png" width="100%"></p>'
             '<p>The same with the circles rendered and measured:</p>'
             '<p><img src="distance_accuracy_rendered.png" width="100%"></p>'
-            f'<h3>Repeatability (Table 4)</h3><p>The ISO 9283 loop through the centre and four corners of a '
-            f'rectangle in a diagonal plane of the cube, {loops} times, on the dynamic simulation (motion '
-            'controller at 1 kHz with the final model); the visual data of the circle at the focus point after '
-            'each loop.</p>' +
-            table(['speed (m/s)', 'range Xc, Yc, Zc (mm)', 'RP (mm)', 'paper: range (mm)', 'paper: RP (mm)'],
-                  rp_rows))
+            '<h3>Repeatability (Table 4)</h3><p>The ISO 9283 loop through the centre and four '
+            f'corners of a rectangle in a diagonal plane of the cube, {loops} times, '
+            'on the dynamic simulation (motion controller at 1 kHz with the final model); '
+            'the visual data of the circle at the focus point after each loop.</p>' +
+            table(['speed (m/s)', 'range Xc, Yc, Zc (mm)', 'RP (mm)', 'paper: range (mm)',
+                   'paper: RP (mm)'], rp_rows))
 
 
 def section_tracking(quick, out_dir):
     """Section 6.2.2: Table 5 on the simulated robot, nominal against calibrated kinematics."""
     table = ts.run(quick=quick)
     ts.plot(table, os.path.join(out_dir, 'tracking.png'))
-    return ('<p>Position-based visual servoing (eq. 23, K_p = 16.8/s; eq. 25 through the motion controller at '
-            '1 kHz) keeps a ball 600 mm in front of the camera while it flies a chaotic path at up to the given '
-            'speed; the camera gives one detection per 8.3 ms frame, a frame late, with the single-frame noise '
-            'of Table 2; the ball\'s velocity comes from a Kalman filter. "calibrated" is the truth\'s geometry '
-            '(Table 1\'s calibrated column): what a perfect calibration finds. The paper\'s figures are for its '
-            'real robot and ball.</p><pre>' + html.escape('\n'.join(ts.table_lines(table))) +
+    return ('<p>Position-based visual servoing (eq. 23, K_p = 16.8/s; eq. 25 through the motion '
+            'controller at 1 kHz) keeps a ball 600 mm in front of the camera while it flies a '
+            'chaotic path at up to the given speed; the camera gives one detection per 8.3 ms '
+            "frame, a frame late, with the single-frame noise of Table 2; the ball's velocity "
+            'comes from a Kalman filter. "calibrated" is the truth\'s geometry '
+            "(Table 1's calibrated column): what a perfect calibration finds. The paper's "
+            'figures are for its real robot and ball.</p><pre>' +
+            html.escape('\n'.join(ts.table_lines(table))) +
             '</pre><p><img src="tracking.png" width="100%"></p>')
 
 
@@ -206,27 +231,33 @@ def build(out_dir, quick=False, session=None, say=print):
     parts = []
     say('identification beside Table 1')
     text, fit = section_identification(nominal, truth, n, 1)
-    parts.append(('Identification beside the paper\'s Table 1', text))
+    parts.append(("Identification beside the paper's Table 1", text))
     say(f'residual loop on each undeclared effect ({seeds} sessions each)')
-    parts.append(('The residual loop: finding what the model lacks', section_residual_loop(nominal, truth, n, seeds, out_dir)))
+    parts.append(('The residual loop: finding what the model lacks',
+                  section_residual_loop(nominal, truth, n, seeds, out_dir)))
     say('pose selection: boundary against optimal')
-    parts.append(('Choosing the poses', section_pose_selection(nominal, truth, n, max(1, seeds // 2))))
+    parts.append(('Choosing the poses',
+                  section_pose_selection(nominal, truth, n, max(1, seeds // 2))))
     say('Jacobian study')
     parts.append(('The Jacobian study (section 6.2.1)', section_jacobian(nominal, fit, out_dir)))
     if session:
         say(f'calibrating the session {session}')
         parts.append(('A recorded session', section_session(session, out_dir)))
     say('static tests (ISO 9283)')
-    parts.append(('Static tests, ISO 9283 (section 6.1)', section_static(nominal, truth, n, quick, out_dir, say)))
+    parts.append(('Static tests, ISO 9283 (section 6.1)',
+                  section_static(nominal, truth, n, quick, out_dir, say)))
     say('tracking tests (Table 5)')
     parts.append(('Tracking (section 6.2.2)', section_tracking(quick, out_dir)))
     body = ''.join(f'<h2>{html.escape(title)}</h2>{text}' for title, text in parts)
-    page = (f'<!doctype html><html><head><meta charset="utf-8"><title>RoboTenis calibration report</title>'
-            '<style>body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse}'
+    page = ('<!doctype html><html><head><meta charset="utf-8">'
+            '<title>RoboTenis calibration report</title>'
+            '<style>body{font-family:sans-serif;max-width:1100px;margin:auto}'
+            'table{border-collapse:collapse}'
             'td,th{border:1px solid #999;padding:3px 8px;text-align:right}</style></head><body>'
             '<h1>RoboTenis calibration report</h1>'
             f'<p>Generated by <code>./robotenis report{" --quick" if quick else ""}</code> in '
-            f'{time.perf_counter() - started:.0f} s on the simulated robot. Lengths in mm, angles in degrees.</p>'
+            f'{time.perf_counter() - started:.0f} s on the simulated robot. '
+            'Lengths in mm, angles in degrees.</p>'
             f'{body}</body></html>')
     path = os.path.join(out_dir, 'index.html')
     with open(path + '.tmp', 'w') as f:
@@ -238,11 +269,13 @@ def build(out_dir, quick=False, session=None, say=print):
 def main(argv=None):
     parser = argparse.ArgumentParser(prog='robotenis report', description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--session', help='a recorded session (bag directory) to calibrate and show')
+    parser.add_argument('--session',
+                        help='a recorded session (bag directory) to calibrate and show')
     parser.add_argument('--quick', action='store_true', help='fewer poses and seeds (CI)')
     parser.add_argument('--out', default='report')
     args = parser.parse_args(argv)
-    path = build(args.out, args.quick, args.session, say=lambda text: print(f'[report] {text}', file=sys.stderr))
+    path = build(args.out, args.quick, args.session,
+                 say=lambda text: print(f'[report] {text}', file=sys.stderr))
     print(f'wrote {path}')
     return 0
 

@@ -17,14 +17,16 @@ from robotenis_control import pbvs
 from robotenis_kinematics.synthetic import NoiseModel
 from robotenis_sim import motors
 
+
 class ScalarPlant:
-    """N true robots (SimulatedMotors) each with its MotionController: the project's own objects."""
+    """N true robots (SimulatedMotors) with a MotionController each: the project's own objects."""
 
     def __init__(self, truth, descs, Theta_start, setup, rng):
         mass = motors.true_masses(truth)
         resolver = motors.ResolverParameters(noise=setup.resolver_noise)
         self.sims = [motors.SimulatedMotors(truth.geometry, mass, resolver=resolver, dt=setup.dt,
-                                            rng=np.random.default_rng(rng.integers(2 ** 32)), Theta_start=th)
+                                            rng=np.random.default_rng(rng.integers(2 ** 32)),
+                                            Theta_start=th)
                      for th in Theta_start]
         self.ctls = [ctl.MotionController(d, max_speed=setup.max_speed) for d in descs]
 
@@ -85,16 +87,17 @@ class BatchPlant:
 
 
 def exposure_ticks(n_frames, setup):
-    """Control ticks at which frames 0..n_frames-1 are exposed: the first tick at or after k T_c."""
+    """List the control ticks exposing frames 0..n_frames-1: the first tick at or after k T_c."""
     return np.ceil(np.arange(n_frames) * setup.frame_period / setup.dt - 1e-9).astype(int)
 
 
 class GroupFilter:
-    """The ball filters of the runs that share one description, as one pbvs.BallKalman.
+    """
+    The ball filters of the runs that share one description, as one pbvs.BallKalman.
 
-    BallKalman's algebra works column by column, and runs with the same camera rotation see the same
-    measurement covariance at the same frame times, so their covariances P are identical: one filter
-    carries every run's state [p, v] as a column of x (6, n).
+    BallKalman's algebra works column by column, and runs with the same camera rotation see the
+    same measurement covariance at the same frame times, so their covariances P are identical: one
+    filter carries every run's state [p, v] as a column of x (6, n).
     """
 
     def __init__(self, q, cov):
@@ -103,8 +106,9 @@ class GroupFilter:
     def update(self, z, dt):
         """Fuse the positions z (3, n) measured dt after the last ones (None: the first)."""
         if self.kf.x is None:
-            self.kf.update(z[:, 0], self.cov)                     # starts P as BallKalman does
-            self.kf.x = np.concatenate([z, np.zeros_like(z)])     # and every run at its own position
+            # starts P as BallKalman does, and every run at its own position
+            self.kf.update(z[:, 0], self.cov)
+            self.kf.x = np.concatenate([z, np.zeros_like(z)])
             return
         self.kf.predict(dt)
         self.kf.update(z, self.cov)
@@ -115,20 +119,27 @@ class GroupFilter:
 
 
 class BatchServo:
-    """pbvs.Tracker's law for every run at once, vectorised: one GroupFilter per description.
+    """
+    pbvs.Tracker's law for every run at once, vectorised: one GroupFilter per description.
 
-    u_r is not clipped here: BatchPlant clips it to the same max_speed, as the motion controller does.
+    u_r is not clipped here: BatchPlant clips it to the same max_speed, as the motion controller
+    does.
     """
 
     def __init__(self, descs, setup):
         self.setup, self.groups = setup, ctl.description_groups(descs)
         self.theta0 = np.array([d.theta0 for d in descs])
         noise = NoiseModel(sigma_camera=setup.assumed_sigma)
-        self.filters = [GroupFilter(setup.kalman_q, noise.cov_Pi(d.camera_rotation)) for d, _ in self.groups]
+        self.filters = [GroupFilter(setup.kalman_q, noise.cov_Pi(d.camera_rotation))
+                        for d, _ in self.groups]
         self.last_t = None
 
     def command(self, t, s, Theta):
-        """u_r (N, 3) for the detections s (N, 3, optical frame) exposed at t with the readings Theta (N, 3)."""
+        """
+        Return u_r (N, 3) for the detections s (N, 3, optical frame) exposed at t.
+
+        Theta (N, 3) are the readings taken with them.
+        """
         dt = None if self.last_t is None else t - self.last_t
         self.last_t = t
         P_est = ctl.forward_by_group(self.groups, self.theta0 + Theta)
@@ -144,21 +155,23 @@ class BatchServo:
 
 
 class TrackerServo:
-    """One pbvs.Tracker per run (the object the pbvs_tracker node runs): the reference for BatchServo."""
+    """One pbvs.Tracker per run (what the pbvs_tracker node runs): the reference for BatchServo."""
 
     def __init__(self, descs, setup):
-        self.trackers = [pbvs.Tracker(d, setup.K_p, setup.s_d, setup.max_speed, setup.kalman_q, setup.assumed_sigma,
-                                      setup.feedforward) for d in descs]
+        self.trackers = [pbvs.Tracker(d, setup.K_p, setup.s_d, setup.max_speed, setup.kalman_q,
+                                      setup.assumed_sigma, setup.feedforward) for d in descs]
 
     def command(self, t, s, Theta):
-        return np.array([tracker.update(t, s_i, Theta_i)[0] for tracker, s_i, Theta_i in zip(self.trackers, s, Theta)])
+        return np.array([tracker.update(t, s_i, Theta_i)[0]
+                         for tracker, s_i, Theta_i in zip(self.trackers, s, Theta)])
 
 
 ENGINES = {'batch': (BatchPlant, BatchServo), 'scalar': (ScalarPlant, TrackerServo)}
 
 
 class VisualLoop:
-    """The hand camera and a visual servo around a plant: one call per exposure.
+    """
+    The hand camera and a visual servo around a plant: one call per exposure.
 
     An exposure measures every run's ball in the optical frame from the TRUE positions and mounting
     plus the camera's bias and noise, and remembers the joints read at that tick; the detection is
@@ -168,17 +181,25 @@ class VisualLoop:
     """
 
     def __init__(self, plant, servo, balls, truth, setup, n_samples, rng):
-        self.plant, self.servo, self.balls, self.truth, self.setup, self.rng = plant, servo, balls, truth, setup, rng
+        self.plant, self.servo, self.balls = plant, servo, balls
+        self.truth, self.setup, self.rng = truth, setup, rng
         self.n_frames = setup.warmup_frames + n_samples
-        self.e_visual, self.e_true = np.empty((len(balls), n_samples)), np.empty((len(balls), n_samples))
+        self.e_visual = np.empty((len(balls), n_samples))
+        self.e_true = np.empty((len(balls), n_samples))
         self.pending, self.frame = deque(), 0
 
     def expose(self, t, Theta):
-        """Take frame ``self.frame`` at time t; serve the one due. True once the last counted frame is served."""
+        """
+        Take frame ``self.frame`` at time t; serve the one due.
+
+        True once the last counted frame is served.
+        """
         setup, s_d = self.setup, np.asarray(self.setup.s_d, dtype=float)
         B = np.array([b.at(t) for b in self.balls])
-        s_true = (B - self.plant.effector() - self.truth.camera_translation) @ self.truth.camera_rotation
-        s = s_true + np.asarray(setup.camera_bias) + self.rng.normal(size=s_true.shape) * np.asarray(setup.sigma_camera)
+        s_true = ((B - self.plant.effector() - self.truth.camera_translation)
+                  @ self.truth.camera_rotation)
+        s = (s_true + np.asarray(setup.camera_bias)
+             + self.rng.normal(size=s_true.shape) * np.asarray(setup.sigma_camera))
         self.pending.append((self.frame, t, s, Theta))
         if setup.warmup_frames <= self.frame < self.n_frames:
             self.e_true[:, self.frame - setup.warmup_frames] = np.linalg.norm(s_true - s_d, axis=1)
@@ -186,17 +207,19 @@ class VisualLoop:
         return len(self.pending) > setup.latency_frames and self.serve(t)
 
     def serve(self, t):
-        """The oldest detection in: the servo's command to the plant at time t."""
+        """Feed the oldest detection to the servo and its command to the plant at time t."""
         shown, t_shown, s, Theta = self.pending.popleft()
         U = self.servo.command(t_shown, s, Theta)
         if shown >= self.setup.warmup_frames:
-            self.e_visual[:, shown - self.setup.warmup_frames] = np.linalg.norm(s - self.setup.s_d, axis=1)
+            column = shown - self.setup.warmup_frames
+            self.e_visual[:, column] = np.linalg.norm(s - self.setup.s_d, axis=1)
         self.plant.set_velocity(U, t)
         return shown == self.n_frames - 1
 
 
 def simulate(plant, servo, balls, truth, setup, n_samples, rng, progress=None):
-    """Run the visual servoing loop on ``plant`` until ``n_samples`` frames after the warm-up are served.
+    """
+    Run the visual servoing loop on ``plant`` until ``n_samples`` frames after warm-up are served.
 
     servo: BatchServo or TrackerServo of the descriptions the runs use; balls: one object with
     ``at(t)`` per run; plant: ScalarPlant, BatchPlant or anything with their methods. Each control
@@ -217,5 +240,3 @@ def simulate(plant, servo, balls, truth, setup, n_samples, rng, progress=None):
         plant.control(t, Theta, dTheta)
         plant.step()
     return loop.e_visual, loop.e_true
-
-

@@ -13,9 +13,14 @@ from robotenis_control import pbvs
 from robotenis_kinematics import delta
 from robotenis_validation.tracking_engines import BatchPlant
 
+
 def kalman_gain(setup, W):
-    """Steady-state gain K (6, 3) and transition (I - K H) F of BallKalman at the frame period, for
-    measurement covariance W (3, 3): the filter's own covariance iterated until it settles."""
+    """
+    Compute the steady-state gain K (6, 3) and transition (I - K H) F of BallKalman.
+
+    At the frame period, for measurement covariance W (3, 3): the filter's own covariance iterated
+    until it settles.
+    """
     T = setup.frame_period
     kf = pbvs.BallKalman(setup.kalman_q)
     kf.update(np.zeros(3), W)
@@ -31,25 +36,34 @@ def kalman_gain(setup, W):
 
 
 def ideal_plant(setup):
-    """(A, B, C) of a robot that moves exactly at the commanded velocity: p_(k+1) = p_k + T v_k."""
+    """
+    Return (A, B, C) of a robot that moves exactly at the commanded velocity.
+
+    p_(k+1) = p_k + T v_k.
+    """
     I3 = np.eye(3)
     return I3, setup.frame_period * I3, I3
 
 
 def linearized_plant(truth, desc, setup, P, eps=1e-6, settle=0.3):
-    """(A, B, C): one true robot with its motion controller (BatchPlant) over one frame, linearised
-    at rest at P (m) by central differences: x_(k+1) = A x_k + B v_k and p_k = C x_k, with x the
-    deviations of (alpha, alphad, held position), v the velocity command held over the frame and p
-    the true effector position. Resolver counts and noise are left out (they are far below the camera
-    noise); the frame must last a whole number of ticks, and the controller must not use kd.
+    """
+    Return (A, B, C): one true robot with its motion controller (BatchPlant) over one frame.
+
+    Linearised at rest at P (m) by central differences: x_(k+1) = A x_k + B v_k and p_k = C x_k,
+    with x the deviations of (alpha, alphad, held position), v the velocity command held over the
+    frame and p the true effector position. Resolver counts and noise are left out (they are far
+    below the camera noise); the frame must last a whole number of ticks, and the controller must
+    not use kd.
     """
     ticks = int(round(setup.frame_period / setup.dt))
     if abs(ticks * setup.dt - setup.frame_period) > 1e-12 or ctl.Gains().kd != 0:
-        raise ValueError("linearized_plant: needs a frame of whole ticks and a controller without kd")
+        raise ValueError('linearized_plant: needs a frame of whole ticks '
+                         'and a controller without kd')
     n = 12                                               # alpha, alphad, hold, v
     Theta = delta.inverse(truth.geometry, np.asarray(P, dtype=float)) - truth.geometry.theta0
     plant = BatchPlant(truth, [desc] * (2 * n + 1), np.tile(Theta, (2 * n + 1, 1)),
-                       replace(setup, resolver_noise=0.0), np.random.default_rng(0), quantise=False)
+                       replace(setup, resolver_noise=0.0), np.random.default_rng(0),
+                       quantise=False)
     t = 0.0
     for _ in range(int(round(settle / setup.dt))):       # settle under gravity, no command
         plant.control(t, *plant.read())
@@ -73,16 +87,18 @@ def linearized_plant(truth, desc, setup, P, eps=1e-6, settle=0.3):
 
 
 def closed_loop(setup, R, plant=None):
-    """The visual loop on a still ball as a linear system, frame by frame: S_(k+1) = M S_k + G w_k.
+    """
+    Model the visual loop on a still ball as a linear system, frame by frame.
 
-    Frame period T, L = latency_frames. The robot is a linear plant x_(k+1) = A x_k + B v_k,
-    e_k = C x_k (``plant``; default ``ideal_plant``, or the ``linearized_plant`` of the simulated
-    robot). The camera measures y_k = e_k + w_k, w_k its noise in the base frame, covariance
-    W = R diag(sigma^2) R^T. The ball is still, so only the noise moves its measured position, and the
-    filter at its steady gain K (for the noise it assumes, ``Setup.assumed_sigma``) is
-    f_k = A_f f_(k-1) - K w_k; a camera bias only shifts e's mean and is left out. The command
-    u_k = -K_p y_k + v_k (eq. 23, v_k the filter's velocity) drives the plant during frame k + L.
-    State S_k = (x_k, f_(k-1), u_(k-1) .. u_(k-L)). Returns (M, G, W, Ce) with e_k = Ce S_k.
+    S_(k+1) = M S_k + G w_k. Frame period T, L = latency_frames. The robot is a linear plant
+    x_(k+1) = A x_k + B v_k, e_k = C x_k (``plant``; default ``ideal_plant``, or the
+    ``linearized_plant`` of the simulated robot). The camera measures y_k = e_k + w_k, w_k its
+    noise in the base frame, covariance W = R diag(sigma^2) R^T. The ball is still, so only the
+    noise moves its measured position, and the filter at its steady gain K (for the noise it
+    assumes, ``Setup.assumed_sigma``) is f_k = A_f f_(k-1) - K w_k; a camera bias only shifts e's
+    mean and is left out. The command u_k = -K_p y_k + v_k (eq. 23, v_k the filter's velocity)
+    drives the plant during frame k + L. State S_k = (x_k, f_(k-1), u_(k-1) .. u_(k-L)). Returns
+    (M, G, W, Ce) with e_k = Ce S_k.
     """
     A, B, C = plant if plant is not None else ideal_plant(setup)
     L, nx = setup.latency_frames, A.shape[0]
@@ -112,8 +128,10 @@ def closed_loop(setup, R, plant=None):
 
 
 def noise_response(setup, R, n_samples, runs=1, plant=None, max_lag=3000):
-    """Mean square of the true error (m^2) on a still ball, from the camera noise and the delays alone,
-    and the standard error of its estimate from ``runs`` runs of ``n_samples`` frames.
+    """
+    Predict the mean square true error (m^2) on a still ball from camera noise and delays alone.
+
+    Also returns the standard error of its estimate from ``runs`` runs of ``n_samples`` frames.
 
     The stationary covariance of ``closed_loop`` solves a discrete Lyapunov equation; the
     autocovariances C(tau) of e give the variance of a sample mean of |e|^2 for a Gaussian process,
@@ -123,7 +141,7 @@ def noise_response(setup, R, n_samples, runs=1, plant=None, max_lag=3000):
 
     M, G, W, Ce = closed_loop(setup, R, plant)
     if max(abs(np.linalg.eigvals(M))) >= 1:
-        raise ValueError("noise_response: the linear loop is unstable for this setup")
+        raise ValueError('noise_response: the linear loop is unstable for this setup')
     S = solve_discrete_lyapunov(M, G @ W @ G.T)
     C0 = Ce @ S @ Ce.T
     total, MS = np.sum(C0 * C0), S @ Ce.T
@@ -132,5 +150,3 @@ def noise_response(setup, R, n_samples, runs=1, plant=None, max_lag=3000):
         Ct = Ce @ MS
         total += 2 * np.sum(Ct * Ct)
     return float(np.trace(C0)), float(np.sqrt(2 * total / (n_samples * runs)))
-
-

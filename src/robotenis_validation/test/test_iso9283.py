@@ -19,7 +19,8 @@ def test_distance_accuracy_by_hand():
     # Commanded 100 apart along x; reached distances 100.2 and 99.6 -> D_bar = 99.9, AD = 0.1.
     reached_1 = [[0, 0, 0], [0, 0, 0]]
     reached_2 = [[100.2, 0, 0], [0, 99.6, 0]]
-    assert iso9283.distance_accuracy(reached_1, reached_2, [0, 0, 0], [100, 0, 0]) == pytest.approx(0.1, abs=1e-12)
+    AD = iso9283.distance_accuracy(reached_1, reached_2, [0, 0, 0], [100, 0, 0])
+    assert AD == pytest.approx(0.1, abs=1e-12)
 
 
 def test_bad_shapes_are_refused():

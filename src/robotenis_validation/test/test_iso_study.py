@@ -1,10 +1,10 @@
-"""Static tests of section 6.1: the distance accuracy and repeatability studies against their noise."""
+"""Static tests of section 6.1: distance accuracy and repeatability studies against their noise."""
 import numpy as np
 import pytest
 
-from robotenis_validation import iso_study as iso
 from robotenis_kinematics import delta, description, synthetic
 from robotenis_sim import motors, truth as sim_truth
+from robotenis_validation import iso_study as iso
 
 
 @pytest.fixture(scope='module')
@@ -14,11 +14,13 @@ def truth():
 
 @pytest.fixture(scope='module')
 def plate(truth):
-    return iso.Plate.in_front_of(iso.CUBE_CENTRE, truth.camera_translation + iso.STANDOFF * truth.camera_rotation[:, 2])
+    return iso.Plate.in_front_of(iso.CUBE_CENTRE,
+                                 truth.camera_translation
+                                 + iso.STANDOFF * truth.camera_rotation[:, 2])
 
 
 def guess(truth):
-    """The user's belief of the camera offset: 5 mm off on each axis."""
+    """Return the user's belief of the camera offset: 5 mm off on each axis."""
     return truth.camera_translation + iso.STANDOFF * truth.camera_rotation[:, 2] + 0.005
 
 
@@ -30,12 +32,17 @@ def test_plate_geometry(plate):
 
 
 def test_perfect_model_leaves_only_the_camera_noise(truth, plate):
-    """With the true geometry the readings cancel exactly, and each pair's AD is |mean of n| of the
-    difference of two camera errors along the pair: |N(0, 2 sigma^2 / n)|, sigma the optical x noise
-    (horizontal pairs, base y) or y noise (vertical pairs, base z). The mean of the per-circle maps
-    weighs pair p by (1/pairs(a) + 1/pairs(b)) / circles: its expectation and spread follow exactly."""
+    """
+    With the true geometry the readings cancel exactly.
+
+    Each pair's AD is then |mean of n| of the difference of two camera errors along the pair:
+    |N(0, 2 sigma^2 / n)|, sigma the optical x noise (horizontal pairs, base y) or y noise
+    (vertical pairs, base z). The mean of the per-circle maps weighs pair p by
+    (1/pairs(a) + 1/pairs(b)) / circles: its expectation and spread follow exactly.
+    """
     n = 3
-    AD = iso.distance_accuracy(truth, truth.geometry, plate, guess(truth), n, np.random.default_rng(4))
+    AD = iso.distance_accuracy(truth, truth.geometry, plate, guess(truth), n,
+                               np.random.default_rng(4))
     sx, sy = synthetic.NoiseModel().sigma_camera[:2]
     pairs = iso.neighbour_pairs()
     count = np.zeros((iso.GRID, iso.GRID))
@@ -51,14 +58,16 @@ def test_perfect_model_leaves_only_the_camera_noise(truth, plate):
 
 
 def test_nominal_model_is_far_worse_than_the_noise(truth, plate):
-    AD_nominal = iso.distance_accuracy(truth, description.nominal(), plate, guess(truth), 1, np.random.default_rng(5))
+    AD_nominal = iso.distance_accuracy(truth, description.nominal(), plate, guess(truth), 1,
+                                       np.random.default_rng(5))
     sx, sy = synthetic.NoiseModel().sigma_camera[:2]
     assert AD_nominal.mean() > 20 * np.sqrt(2) * max(sx, sy)
 
 
 def test_repeatability_is_camera_noise_plus_the_resolver_resolution(truth):
     rng = np.random.default_rng(6)
-    samples = iso.repeatability(truth, motors.true_masses(truth), description.nominal(), 2.0, 4, rng)
+    samples = iso.repeatability(truth, motors.true_masses(truth), description.nominal(), 2.0, 4,
+                                rng)
     assert samples.shape == (4, 3)
     q = motors.ResolverParameters().resolution
     J = np.linalg.norm(delta.jacobian(truth.geometry, iso.CUBE_CENTRE), 2)
