@@ -17,7 +17,8 @@ setup(
     zip_safe=True,
     maintainer='RoboTenis maintainers',
     maintainer_email='maintainers@robotenis.org',
-    description="""Lagrangian dynamics with massive forearms, 4-5-6-7 trajectories, and the nonlinear feedforward PD motion controller.""",
+    description=('Lagrangian dynamics with massive forearms, 4-5-6-7 trajectories, and the '
+                 'nonlinear feedforward PD motion controller.'),
     license='Apache-2.0',
     # Declaring pytest makes colcon test run pytest; without it unittest runs and finds 0 tests.
     extras_require={'test': ['pytest']},

@@ -17,7 +17,8 @@ setup(
     zip_safe=True,
     maintainer='RoboTenis maintainers',
     maintainer_email='maintainers@robotenis.org',
-    description="""A simulated RoboTenis: motor dynamics, resolvers and the hand camera, from a truth file read by the simulator only.""",
+    description=('A simulated RoboTenis: motor dynamics, resolvers and the hand camera, '
+                 'from a truth file read by the simulator only.'),
     license='Apache-2.0',
     # Declaring pytest makes colcon test run pytest; without it unittest runs and finds 0 tests.
     extras_require={'test': ['pytest']},

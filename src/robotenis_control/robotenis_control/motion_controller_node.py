@@ -1,11 +1,12 @@
-"""The `motion_controller` node: Cartesian goals and velocities to drive velocity commands (eq. 11).
+"""
+The `motion_controller` node: Cartesian goals and velocities to drive velocity commands (eq. 11).
 
 Subscribes joint_states (motor_1..3, position = resolver increment from home, rad; velocity rad/s),
 goal (PointStamped, base frame, m: chained rest-to-rest 4-5-6-7 segments), cmd_vel_cartesian
 (TwistStamped, linear m/s: replaces the plan while commands keep coming) and robot_description
-(std_msgs/String, latched, e.g. from calibration). Publishes motor_velocity_cmd (JointState, velocity
-field, motor_1..3) every tick and controller/state (PointStamped: the effector position from the
-forward kinematics of the description in use) every ``state_decimation`` ticks.
+(std_msgs/String, latched, e.g. from calibration). Publishes motor_velocity_cmd (JointState,
+velocity field, motor_1..3) every tick and controller/state (PointStamped: the effector position
+from the forward kinematics of the description in use) every ``state_decimation`` ticks.
 
 Ticks come from a timer at ``rate`` (wall clock, or /clock with use_sim_time), or, with
 ``tick_on_joint_states``, from every joint reading (lockstep with a simulator; the command then
@@ -75,7 +76,7 @@ class MotionControllerNode(Node):
         return ctl.Gains(**{k: float(v) for k, v in values.items()})
 
     def on_parameters(self, params):
-        """Apply description_path, gains and limits while running; refuse values that do not work."""
+        """Apply description_path, gains and limits at run time; refuse values that do not work."""
         changes = {q.name: q.value for q in params}
         try:
             if 'description_path' in changes:
@@ -83,7 +84,7 @@ class MotionControllerNode(Node):
             gains = self.read_gains(changes)
             for key in ('max_speed', 'max_acceleration'):
                 if key in changes and not float(changes[key]) > 0:
-                    raise ValueError(f"{key} must be positive")
+                    raise ValueError(f'{key} must be positive')
         except (DescriptionError, ValueError, TypeError) as e:
             return SetParametersResult(successful=False, reason=str(e))
         if 'description_path' in changes:
@@ -91,7 +92,8 @@ class MotionControllerNode(Node):
             self.get_logger().info(f"robot description from {changes['description_path']}")
         self.controller.gains = gains
         self.controller.max_speed = float(changes.get('max_speed', self.controller.max_speed))
-        self.controller.max_acceleration = float(changes.get('max_acceleration', self.controller.max_acceleration))
+        self.controller.max_acceleration = float(changes.get('max_acceleration',
+                                                             self.controller.max_acceleration))
         return SetParametersResult(successful=True)
 
     def on_reload(self, request, response):
@@ -115,7 +117,8 @@ class MotionControllerNode(Node):
     def on_joint_states(self, msg):
         Theta = joint_vector(msg, 'position')
         if Theta is None:
-            self.get_logger().error('joint_states without positions of motor_1..3', throttle_duration_sec=1.0)
+            self.get_logger().error('joint_states without positions of motor_1..3',
+                                    throttle_duration_sec=1.0)
             return
         dTheta = joint_vector(msg, 'velocity')
         if self.tick_on_joint_states:

@@ -57,11 +57,11 @@ class PbvsTrackerNode(Node):
         self.create_subscription(PointStamped, 'sphere/position', self.on_sphere, 10)
 
     def make_tracker(self, changes):
-        """Return (enabled, a new pbvs.Tracker) with ``changes`` applied; ValueError names a bad one."""
+        """Return (enabled, a new pbvs.Tracker) after ``changes``; ValueError names a bad one."""
         def get(name):
             return changes.get(name, self.get_parameter(name).value)
-        kp, distance, max_speed, q = (float(get(n)) for n in ('kp', 'distance', 'max_speed',
-                                                               'kalman_q'))
+        kp, distance, max_speed, q = (float(get(n))
+                                      for n in ('kp', 'distance', 'max_speed', 'kalman_q'))
         sigma = np.asarray(get('camera_sigma'), dtype=float)
         if not (kp > 0 and distance > 0 and max_speed > 0 and q > 0):
             raise ValueError('kp, distance, max_speed and kalman_q must be positive '

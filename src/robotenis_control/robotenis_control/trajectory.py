@@ -1,13 +1,15 @@
-"""Cartesian point-to-point trajectories on the 4-5-6-7 polynomial (dynamics paper, section III).
+"""
+Cartesian point-to-point trajectories on the 4-5-6-7 polynomial (dynamics paper, section III).
 
 A segment goes in a straight line from P0 to P1 as P(t) = P0 + (P1 - P0) s(t/T), with
 
     s(u) = 35 u^4 - 84 u^5 + 70 u^6 - 20 u^7,   u in [0, 1]
 
 whose velocity, acceleration and jerk are zero at both ends: accelerations are continuous and the
-jerk finite, also where segments are chained rest to rest. The duration T is the shortest that keeps
-the speed under v_max and the acceleration under a_max: the peaks of s' and s'' are 35/16 (at
-u = 1/2) and S2_PEAK (at u = (5 - sqrt 5)/10), so T = max(35/16 L / v_max, sqrt(S2_PEAK L / a_max)).
+jerk finite, also where segments are chained rest to rest. The duration T is the shortest that
+keeps the speed under v_max and the acceleration under a_max: the peaks of s' and s'' are 35/16
+(at u = 1/2) and S2_PEAK (at u = (5 - sqrt 5)/10), so
+T = max(35/16 L / v_max, sqrt(S2_PEAK L / a_max)).
 """
 from dataclasses import dataclass
 
@@ -18,7 +20,7 @@ U_S2_PEAK = (5.0 - np.sqrt(5.0)) / 10.0     # where s''' = 840 u (1 - u) (5u^2 -
 
 
 def s_derivatives(u):
-    """s, s', s'', s''' of the 4-5-6-7 polynomial at u (array), derivatives with respect to u."""
+    """Return s, s', s'', s''' of the 4-5-6-7 polynomial at u (array), derivatives along u."""
     u = np.asarray(u, dtype=float)
     u2, u3 = u * u, u * u * u
     s = u2 * u2 * (35 - 84 * u + 70 * u2 - 20 * u3)
@@ -32,9 +34,9 @@ S2_PEAK = float(s_derivatives(U_S2_PEAK)[2])
 
 
 def duration(distance, v_max, a_max):
-    """Shortest T (s) of a segment of ``distance`` (m) with speed <= v_max (m/s), acceleration <= a_max."""
+    """Return the shortest T (s) for ``distance`` m with speed <= v_max m/s, accel <= a_max."""
     if v_max <= 0 or a_max <= 0:
-        raise ValueError(f"trajectory limits must be positive: v_max={v_max!r}, a_max={a_max!r}")
+        raise ValueError(f'trajectory limits must be positive: v_max={v_max!r}, a_max={a_max!r}')
     return max(S1_PEAK * distance / v_max, np.sqrt(S2_PEAK * distance / a_max))
 
 
@@ -52,7 +54,10 @@ class Segment:
         return self.t0 + self.T
 
     def sample(self, t):
-        """Position, velocity, acceleration and jerk at times t (array (N,) or scalar), each (..., 3).
+        """
+        Return position, velocity, acceleration and jerk at times t (array (N,) or scalar).
+
+        Each is (..., 3).
 
         Before t0 the segment is at rest at P0, after t0 + T at rest at P1.
         """
@@ -66,18 +71,19 @@ class Segment:
 
 
 def segment(P0, P1, t0, v_max, a_max):
-    """The fastest segment from P0 to P1 within the limits, starting at t0."""
+    """Return the fastest segment from P0 to P1 within the limits, starting at t0."""
     P0, P1 = np.asarray(P0, dtype=float), np.asarray(P1, dtype=float)
     return Segment(P0, P1, float(t0), float(duration(np.linalg.norm(P1 - P0), v_max, a_max)))
 
 
 class Chain:
-    """Segments chained rest to rest through a list of waypoints; sample() covers the whole chain."""
+    """Segments chained rest to rest through the waypoints; sample() covers the whole chain."""
 
     def __init__(self, waypoints, v_max, a_max, t0=0.0):
         waypoints = np.asarray(waypoints, dtype=float)
         if waypoints.ndim != 2 or waypoints.shape[1] != 3 or len(waypoints) < 2:
-            raise ValueError(f"waypoints: expected (N >= 2, 3) positions, got shape {waypoints.shape}")
+            raise ValueError('waypoints: expected (N >= 2, 3) positions, got shape '
+                             f'{waypoints.shape}')
         self.segments = []
         t = t0
         for P0, P1 in zip(waypoints[:-1], waypoints[1:]):
@@ -93,7 +99,7 @@ class Chain:
         return self.segments[-1].t1
 
     def sample(self, t):
-        """Position, velocity, acceleration, jerk at times t (N,), each (N, 3)."""
+        """Return position, velocity, acceleration, jerk at times t (N,), each (N, 3)."""
         t = np.atleast_1d(np.asarray(t, dtype=float))
         ends = np.array([s.t1 for s in self.segments])
         which = np.minimum(np.searchsorted(ends, t, side='left'), len(self.segments) - 1)

@@ -15,13 +15,14 @@ def desc():
 def test_on_the_desired_motion_the_drive_applies_the_model_torque():
     """Zero error: tau = K_V (alphad_ref - alphad) = tau_d exactly (what eq. 11 is for)."""
     gains = ctl.Gains(kp=150, kd=0.5, kv=60)
-    alpha_d, dalpha_d, tau_d = np.array([0.1, 0.2, 0.3]), np.array([1.0, -2.0, 0.5]), np.array([10.0, -5.0, 30.0])
+    alpha_d, dalpha_d, tau_d = (np.array([0.1, 0.2, 0.3]), np.array([1.0, -2.0, 0.5]),
+                                np.array([10.0, -5.0, 30.0]))
     ref = ctl.velocity_command(alpha_d, dalpha_d, tau_d, alpha_d, dalpha_d, gains)
     np.testing.assert_allclose(ctl.drive_torque(ref, dalpha_d, gains.kv), tau_d)
 
 
 def test_errors_add_a_pd_torque():
-    """tau - tau_d = K_V K_p e + K_V (1 + K_d) edot."""
+    """Check tau - tau_d = K_V K_p e + K_V (1 + K_d) edot."""
     gains = ctl.Gains(kp=100, kd=0.5, kv=40)
     e, edot = np.array([1e-3, -2e-3, 0.0]), np.array([0.0, 0.1, -0.2])
     alpha, dalpha = np.zeros(3), np.ones(3)
@@ -38,8 +39,10 @@ def test_goal_is_reached_on_the_planned_time(desc):
     c.add_goal(goal, 0.0)
     end = c.segments[-1].t1
     P, dP, ddP = c.desired(end / 2)
-    assert np.linalg.norm(dP) == pytest.approx(2.0, rel=1e-9)   # 283 mm at 2 m/s, 4 g: speed-limited
-    assert np.allclose(P, (home + goal) / 2, atol=1e-9)   # the polynomial is symmetric about u = 1/2
+    # 283 mm at 2 m/s, 4 g: speed-limited
+    assert np.linalg.norm(dP) == pytest.approx(2.0, rel=1e-9)
+    # the polynomial is symmetric about u = 1/2
+    assert np.allclose(P, (home + goal) / 2, atol=1e-9)
     P, dP, _ = c.desired(end + 1e-3)
     np.testing.assert_allclose(P, goal)
     np.testing.assert_allclose(dP, 0)
@@ -78,9 +81,13 @@ def test_velocity_commands_integrate_then_time_out(desc):
 
 
 def test_batch_velocity_mode_commands_as_the_scalar_controller_does():
-    """BatchVelocityController is MotionController's velocity mode vectorised over runs, each run
+    """
+    Check that the batch velocity mode commands as the scalar controller does.
+
+    BatchVelocityController is MotionController's velocity mode vectorised over runs, each run
     with its own description: the same readings and velocity commands give the same drive
-    commands, through a timeout too."""
+    commands, through a timeout too.
+    """
     descs = [description.nominal(), description.load(description.config_path(
         'table1_calibrated.yaml'))]
     runs = [descs[0], descs[1], descs[0]]

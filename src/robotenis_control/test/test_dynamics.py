@@ -1,4 +1,4 @@
-"""Dynamics (eqs. 1-9): the equations against the energy they come from, and against each other."""
+"""Dynamics (eqs. 1-9): the equations against the energy they come from and each other."""
 import numpy as np
 import pytest
 
@@ -12,32 +12,36 @@ def desc():
 
 
 def random_states(desc, n, seed):
-    """Effector positions well inside the workspace with random velocities (m/s) and accelerations."""
+    """Draw effector positions deep in the workspace, random velocities (m/s) and accelerations."""
     rng = np.random.default_rng(seed)
     P = np.array([0.0, 0.0, 0.8]) + rng.uniform(-0.2, 0.2, size=(n, 3))
     return P, rng.normal(scale=2.0, size=(n, 3)), rng.normal(scale=30.0, size=(n, 3))
 
 
 def test_static_torque_is_the_virtual_work_gravity_torque(desc):
-    """At rest the torques hold gravity: the kinematics package's virtual-work formula, same load."""
+    """At rest, torques hold gravity: the kinematics package's virtual-work formula, same load."""
     mass = dyn.MassParameters()
     P = random_states(desc, 50, 1)[0]
     motion = dyn.inverse_dynamics(desc, mass, P, np.zeros_like(P), np.zeros_like(P))
     load = {'arm': 0.5 * (mass.m_a + mass.m_b), 'platform': mass.m_p + 1.5 * mass.m_b}
-    np.testing.assert_allclose(motion.tau, -effects.gravity_torque(desc, P, motion.alpha, load), rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(motion.tau, -effects.gravity_torque(desc, P, motion.alpha, load),
+                               rtol=1e-10, atol=1e-10)
 
 
 def test_power_balance_along_a_motion(desc):
-    """Constraint forces do no work, so dE/dt = tau . alphad: checks eqs. 4-5 against T + V (eqs. 6-9).
+    """
+    Check eqs. 4-5 against T + V (eqs. 6-9): constraint forces do no work, so dE/dt = tau . alphad.
 
-    dE/dt by central differences of step h has error O(h^2 E'''), far below 1e-6 of the power here.
+    dE/dt by central differences of step h has error O(h^2 E'''), far below 1e-6 of the power
+    here.
     """
     mass = dyn.MassParameters()
     P0, V0, A0 = random_states(desc, 20, 2)
     h = 1e-5
 
     def E(s):
-        alpha, dalpha, _ = dyn.joint_motion(desc, P0 + V0 * s + 0.5 * A0 * s * s, V0 + A0 * s, A0)
+        alpha, dalpha, _ = dyn.joint_motion(desc, P0 + V0 * s + 0.5 * A0 * s * s, V0 + A0 * s,
+                                            A0)
         return dyn.energy(desc, mass, alpha, dalpha)
 
     dE = (E(h) - E(-h)) / (2 * h)
@@ -51,7 +55,8 @@ def test_forward_dynamics_inverts_inverse_dynamics(desc, mass):
     P, V, A = random_states(desc, 30, 3)
     motion = dyn.inverse_dynamics(desc, mass, P, V, A)
     ddalpha = dyn.forward_dynamics(desc, mass, motion.alpha, motion.dalpha, motion.tau)
-    np.testing.assert_allclose(ddalpha, motion.ddalpha, rtol=1e-9, atol=1e-9 * np.abs(motion.ddalpha).max())
+    np.testing.assert_allclose(ddalpha, motion.ddalpha, rtol=1e-9,
+                               atol=1e-9 * np.abs(motion.ddalpha).max())
 
 
 def test_single_robot_scalars_match_the_vectorised_equations(desc):
@@ -60,7 +65,8 @@ def test_single_robot_scalars_match_the_vectorised_equations(desc):
     motion = dyn.inverse_dynamics(desc, mass, P, V, A)
     single = dyn.SingleRobotDynamics(desc, mass)
     for k in range(len(P)):
-        ddalpha, P_k, dP_k = single.accelerations(list(motion.alpha[k]), list(motion.dalpha[k]), list(motion.tau[k]))
+        ddalpha, P_k, dP_k = single.accelerations(list(motion.alpha[k]), list(motion.dalpha[k]),
+                                                  list(motion.tau[k]))
         np.testing.assert_allclose(ddalpha, motion.ddalpha[k], rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(P_k, P[k], atol=1e-12)
         np.testing.assert_allclose(dP_k, V[k], atol=1e-11)
@@ -71,7 +77,7 @@ def test_single_robot_scalars_match_the_vectorised_equations(desc):
 
 
 def test_massless_forearms_only_move_the_platform_and_arms(desc):
-    """With m_b = 0 the forearm terms vanish: tau = I_t alphadd + (arm gravity) + J^T (m_p (Pdd - g z))."""
+    """m_b = 0: no forearm terms, tau = I_t alphadd + (arm gravity) + J^T (m_p (Pdd - g z))."""
     mass = dyn.MassParameters().massless_forearms()
     P, V, A = random_states(desc, 10, 5)
     motion = dyn.inverse_dynamics(desc, mass, P, V, A)

@@ -26,7 +26,8 @@ def test_peaks_of_speed_and_acceleration():
     assert np.abs(s2).max() == pytest.approx(tr.S2_PEAK, rel=1e-8)
 
 
-@pytest.mark.parametrize('distance, v_max, a_max', [(0.2828, 2.0, 4 * 9.81), (0.4, 4.0, 98.1), (0.01, 4.0, 98.1)])
+@pytest.mark.parametrize('distance, v_max, a_max',
+                         [(0.2828, 2.0, 4 * 9.81), (0.4, 4.0, 98.1), (0.01, 4.0, 98.1)])
 def test_segment_respects_the_limits_and_reaches_one(distance, v_max, a_max):
     seg = tr.segment([0, 0, 0.75], [distance, 0, 0.75], 0.0, v_max, a_max)
     t = np.linspace(0, seg.T, 20001)

@@ -1,9 +1,10 @@
-"""Where the ball is: fixed on its rod for calibration, or flying a chaotic path for tracking.
+"""
+Where the ball is: fixed on its rod for calibration, or flying a chaotic path for tracking.
 
-The chaotic path is the Lorenz attractor, integrated once on a fine grid, scaled into a box in front
-of the robot and re-timed so that its fastest point moves at ``max_speed`` (the paper's tracking
-tests: 500 to 1500 mm/s). It is deterministic for a seed, smooth (continuous acceleration) and never
-repeats over a test's 5,000 samples.
+The chaotic path is the Lorenz attractor, integrated once on a fine grid, scaled into a box in
+front of the robot and re-timed so that its fastest point moves at ``max_speed`` (the paper's
+tracking tests: 500 to 1500 mm/s). It is deterministic for a seed, smooth (continuous
+acceleration) and never repeats over a test's 5,000 samples.
 """
 from dataclasses import dataclass
 
@@ -21,7 +22,7 @@ class FixedBall:
 
 
 class ChaoticBall:
-    """A ball on a scaled Lorenz trajectory; ``at(t)`` gives positions (..., 3) in the base frame, m."""
+    """A ball on a scaled Lorenz trajectory; ``at(t)`` gives positions (..., 3), base frame, m."""
 
     def __init__(self, centre, half_size, max_speed, seed=0, duration=120.0, dt=1e-3):
         rng = np.random.default_rng(seed)
@@ -46,7 +47,7 @@ class ChaoticBall:
         return self._dt * (len(self._points) - 1)
 
     def at(self, t):
-        """Position at time t (s), linear between samples; the path wraps after ``duration``."""
+        """Return the position at time t (s), linear between samples; wraps after ``duration``."""
         x = (np.asarray(t, dtype=float) % self.duration) / self._dt
         i = np.minimum(np.floor(x).astype(int), len(self._points) - 2)
         w = (x - i)[..., None]

@@ -1,26 +1,28 @@
-"""The hand camera's picture of the ball, with known ground truth (no rclpy).
+"""
+The hand camera's picture of the ball, with known ground truth (no rclpy).
 
 ``render(camera, C, R, rng)`` draws the sphere of radius R centred at C (optical frame: x right,
 y down, z forward, m) as the camera (robotenis_vision.camera.Camera: K, plumb_bob D) sees it:
 
 * exact outline: a pixel ray d (undistorted through the camera's plumb_bob model) meets the sphere
-  when the angle between d and C is below the half-angle beta of the tangent cone, sin(beta) = R/|C|.
-  The outline is that cone's section, a conic, bent by the distortion. Pixels within a pixel of it are
-  supersampled (8x8 rays, the undistortion linearised across the pixel) for anti-aliasing;
-* shading at the surface point met by each ray: ambient + Lambertian diffuse for a light direction +
-  a Blinn-Phong specular highlight; values above 255 saturate as on a real sensor;
+  when the angle between d and C is below the half-angle beta of the tangent cone,
+  sin(beta) = R/|C|. The outline is that cone's section, a conic, bent by the distortion. Pixels
+  within a pixel of it are supersampled (8x8 rays, the undistortion linearised across the pixel)
+  for anti-aliasing;
+* shading at the surface point met by each ray: ambient + Lambertian diffuse for a light
+  direction + a Blinn-Phong specular highlight; values above 255 saturate as on a real sensor;
 * a background that is not flat: a linear gradient plus a smooth random texture;
 * a Gaussian blur (lens and focus), then Gaussian sensor noise and rounding to 8 bits.
 
-Speed (one 640x480 frame in a few ms): everything that depends only on the camera (the undistorted
-ray of every pixel), on the background and on the blur is computed once and cached; a frame starts
-as one of a few finished noisy backgrounds (uint8), and only a box around the ball is rendered,
-blurred and given fresh noise (outside it the noise repeats from frame to frame: nothing is measured
-there). ``sphere_in_optical`` places the ball in the optical frame from the effector position and
-the camera mounting (the hand_camera node).
+Speed (one 640x480 frame in a few ms): everything that depends only on the camera (the
+undistorted ray of every pixel), on the background and on the blur is computed once and cached; a
+frame starts as one of a few finished noisy backgrounds (uint8), and only a box around the ball is
+rendered, blurred and given fresh noise (outside it the noise repeats from frame to frame: nothing
+is measured there). ``sphere_in_optical`` places the ball in the optical frame from the effector
+position and the camera mounting (the hand_camera node).
 """
-import functools
 from dataclasses import dataclass
+import functools
 
 import cv2
 import numpy as np
@@ -53,16 +55,18 @@ class Background:
     seed: int = 1
 
 
-def render(camera, sphere_centre_optical, radius, rng, lighting=Lighting(), background=Background(),
-           blur_sigma=0.8, noise_sigma=2.0):
-    """A mono8 image (height, width) of the sphere; only the background if the sphere is out of view."""
+def render(camera, sphere_centre_optical, radius, rng, lighting=Lighting(),
+           background=Background(), blur_sigma=0.8, noise_sigma=2.0):
+    """Render a mono8 image (height, width) of the sphere; the background only if out of view."""
     C = np.asarray(sphere_centre_optical, dtype=float)
     if C.shape != (3,) or not np.all(np.isfinite(C)):
-        raise ValueError(f'sphere_centre_optical: expected 3 finite numbers, got {sphere_centre_optical!r}')
+        raise ValueError('sphere_centre_optical: expected 3 finite numbers, '
+                         f'got {sphere_centre_optical!r}')
     if not radius > 0:
         raise ValueError(f'radius: must be positive, got {radius!r}')
     if blur_sigma < 0 or noise_sigma < 0:
-        raise ValueError(f'blur_sigma and noise_sigma must not be negative, got {blur_sigma}, {noise_sigma}')
+        raise ValueError('blur_sigma and noise_sigma must not be negative, '
+                         f'got {blur_sigma}, {noise_sigma}')
     bank = _background_bank(_camera_key(camera), background, float(blur_sigma), float(noise_sigma))
     frame = bank[rng.integers(len(bank))].copy()
     box = _sphere_box(camera, C, radius)
@@ -73,12 +77,12 @@ def render(camera, sphere_centre_optical, radius, rng, lighting=Lighting(), back
 
 
 def sphere_outline(camera, sphere_centre_optical, radius, n=360):
-    """n points (n, 2) of the sphere's exact outline in the image (distorted pixels), in order."""
+    """Return the sphere's exact outline, n points (n, 2) in distorted pixels, in order."""
     return camera.project(tangent_circle(sphere_centre_optical, radius, n))
 
 
 def tangent_circle(C, R, n):
-    """Points (n, 3) where rays from the optical centre touch the sphere: its apparent outline."""
+    """Return the points (n, 3) where camera rays touch the sphere: its apparent outline."""
     C = np.asarray(C, dtype=float)
     d2 = C @ C
     if d2 <= R * R:
@@ -100,8 +104,9 @@ def _camera_key(camera):
 
 @functools.lru_cache(maxsize=4)
 def _ray_maps(key):
-    """Undistorted normalized (x, y) of every pixel centre and their derivatives along u and v."""
-    K, D, width, height = np.frombuffer(key[0]).reshape(3, 3), np.frombuffer(key[1]), key[2], key[3]
+    """Return each pixel centre's undistorted normalized (x, y) and its derivatives along u, v."""
+    K, D, width, height = (np.frombuffer(key[0]).reshape(3, 3), np.frombuffer(key[1]), key[2],
+                           key[3])
     camera = Camera(K, D, width, height)
     u, v = np.meshgrid(np.arange(width, dtype=float), np.arange(height, dtype=float))
     xy = camera.pixel_rays(np.stack([u, v], axis=-1))
@@ -113,12 +118,13 @@ def _ray_maps(key):
 
 @functools.lru_cache(maxsize=8)
 def _raw_background(key, background):
-    """The background before blur: gradient plus texture (float32, height x width)."""
+    """Return the background before blur: gradient plus texture (float32, height x width)."""
     width, height = key[2], key[3]
     rng = np.random.default_rng(background.seed)
     u, v = np.meshgrid(np.arange(width), np.arange(height))
     s = (u * np.cos(background.angle) + v * np.sin(background.angle))
-    ramp = background.low + (background.high - background.low) * (s - s.min()) / max(s.max() - s.min(), 1)
+    ramp = (background.low
+            + (background.high - background.low) * (s - s.min()) / max(s.max() - s.min(), 1))
     texture = rng.standard_normal((height, width))
     if background.texture_scale > 0:
         texture = cv2.GaussianBlur(texture, (0, 0), background.texture_scale)
@@ -133,10 +139,11 @@ def _blurred_background(key, background, blur_sigma):
 
 @functools.lru_cache(maxsize=4)
 def _background_bank(key, background, blur_sigma, noise_sigma):
-    """BANK finished frames (uint8) of the blurred background with independent noise.
+    """
+    Return BANK finished frames (uint8) of the blurred background with independent noise.
 
-    A frame starts as one of them; the box around the ball gets fresh noise of its own, so the noise
-    only repeats where nothing is measured.
+    A frame starts as one of them; the box around the ball gets fresh noise of its own, so the
+    noise only repeats where nothing is measured.
     """
     rng = np.random.default_rng(12345)
     base = _blurred_background(key, background, blur_sigma)
@@ -160,19 +167,19 @@ def _blur(image, blur_sigma):
 
 def _to_uint8(frame):
     np.clip(frame, 0.0, 255.0, out=frame)
-    return cv2.convertScaleAbs(frame)   # rounds to nearest; the clip makes the absolute value harmless
+    return cv2.convertScaleAbs(frame)   # rounds to nearest; after the clip the abs() is harmless
 
 
-# --- the sphere --------------------------------------------------------------------------------
+# --- the sphere ------------------------------------------------------------------------------
 
 def _in_front(C, R):
-    """True when the whole tangent cone lies in front of the camera (the outline is an ellipse)."""
+    """Return whether the whole tangent cone is in front of the camera (outline: an ellipse)."""
     d = np.linalg.norm(C)
     return d > R and np.arccos(np.clip(C[2] / d, -1, 1)) + np.arcsin(R / d) < np.deg2rad(80)
 
 
 def _sphere_box(camera, C, R, margin=2):
-    """Pixel box (u0, u1, v0, v1), end-exclusive, around the outline plus ``margin``; None if unseen."""
+    """Box the outline + ``margin`` in pixels (u0, u1, v0, v1), end-exclusive; None if unseen."""
     if not _in_front(C, R):
         return None
     outline = sphere_outline(camera, C, R, 96)
@@ -192,7 +199,8 @@ def _sphere_box(camera, C, R, margin=2):
 
 
 def _shade(x, y, C, R, lighting):
-    """Brightness of the sphere along the rays (x, y, 1); a ray that misses shades the limb.
+    """
+    Return the sphere's brightness along the rays (x, y, 1); a ray that misses shades the limb.
 
     The ray meets the sphere at t d (d the unit ray, t the nearer root); the normal there is
     (t d - C) / R. Ambient + diffuse max(n.l, 0) + specular max(n.h, 0)^shininess, with
@@ -215,33 +223,36 @@ def _shade(x, y, C, R, lighting):
 
 
 def _subsample_offsets(n=SUPERSAMPLE):
-    """n x n offsets inside a pixel (-0.5..0.5), the grid turned slightly so no edge aligns with it."""
+    """Return n x n offsets in a pixel (-0.5..0.5), the grid turned slightly so no edge aligns."""
     g = (np.arange(n) + 0.5) / n - 0.5
     du, dv = np.meshgrid(g, g)
     a = np.arctan(1.0 / n)
-    off = np.stack([du.ravel() * np.cos(a) - dv.ravel() * np.sin(a), du.ravel() * np.sin(a) + dv.ravel() * np.cos(a)], -1)
+    off = np.stack([du.ravel() * np.cos(a) - dv.ravel() * np.sin(a),
+                    du.ravel() * np.sin(a) + dv.ravel() * np.cos(a)], -1)
     return (off + 0.5) % 1.0 - 0.5
 
 
 _OFFSETS = _subsample_offsets()
-_SHADE_SUBSET = np.flatnonzero((np.arange(SUPERSAMPLE ** 2) // SUPERSAMPLE) % 2 == 0)[::2]   # 4 x 4 of the 8 x 8
+# 4 x 4 of the 8 x 8
+_SHADE_SUBSET = np.flatnonzero((np.arange(SUPERSAMPLE ** 2) // SUPERSAMPLE) % 2 == 0)[::2]
 
 
 def _cone_value(x, y, C, cos2_beta):
-    """(d.C)^2 - cos^2(beta) |d|^2 |C|^2 for rays d = (x, y, 1): positive inside the tangent cone."""
+    """Return (d.C)^2 - cos^2(beta) |d|^2 |C|^2 for rays d = (x, y, 1); > 0 in the tangent cone."""
     dot = x * C[0] + y * C[1] + C[2]
     return np.where(dot > 0, dot * dot - cos2_beta * (C @ C) * (x * x + y * y + 1.0), -1.0)
 
 
 def _coverage_and_shade(camera, C, R, lighting, box):
-    """Fraction of each box pixel covered by the sphere, and the sphere's brightness at the pixel."""
+    """Return the fraction of each box pixel the sphere covers, and its brightness at the pixel."""
     u0, u1, v0, v1 = box
     xy, dxy_du, dxy_dv = (m[v0:v1, u0:u1] for m in _ray_maps(_camera_key(camera)))
     x, y = xy[..., 0], xy[..., 1]
     cos2_beta = 1.0 - R * R / (C @ C)
     q = _cone_value(x, y, C, cos2_beta)
     gq_v, gq_u = np.gradient(q)
-    dist = -q / np.maximum(np.hypot(gq_u, gq_v), 1e-300)  # signed distance to the outline, px (outside > 0)
+    # signed distance to the outline, px (outside > 0)
+    dist = -q / np.maximum(np.hypot(gq_u, gq_v), 1e-300)
     cover = (q > 0).astype(np.float32)
     edge = np.abs(dist) < 0.8          # a pixel corner is 0.71 px from its centre
     sub_u, sub_v = _OFFSETS[:, 0], _OFFSETS[:, 1]
@@ -253,14 +264,16 @@ def _coverage_and_shade(camera, C, R, lighting, box):
     shade = np.zeros(cover.shape, np.float32)
     lit = (cover > 0) & ~edge
     shade[lit] = _shade(x[lit], y[lit], C, R, lighting)
-    # The shading of a pixel on the outline is the mean over its covered part (the limb brightens as a
-    # square root inward, so the centre's value would not do); a quarter of the rays is plenty for it.
+    # The shading of a pixel on the outline is the mean over its covered part (the limb brightens
+    # as a square root inward, so the centre's value would not do); a quarter of the rays is
+    # plenty for it.
     sub = _SHADE_SUBSET
     hit = inside[:, sub]
     values = _shade(sx[:, sub], sy[:, sub], C, R, lighting)
     count = hit.sum(axis=1)
     mean = np.sum(values * hit, axis=1) / np.maximum(count, 1)
-    none = count == 0        # covered only by rays outside the shading quarter: the limb at the centre
+    # covered only by rays outside the shading quarter: the limb at the centre
+    none = count == 0
     if np.any(none):
         mean[none] = _shade(xe[none, 0], ye[none, 0], C, R, lighting)
     shade[edge] = mean
@@ -273,7 +286,8 @@ def _grow(box, m, camera):
 
 
 def _draw_sphere(frame, camera, C, R, lighting, background, blur_sigma, noise_sigma, rng, box):
-    """Render the ball in its box, blur, add fresh noise and write the result into the frame.
+    """
+    Render the ball in its box, blur, add fresh noise and write the result into the frame.
 
     With m the blur's radius: the blurred ball reaches m beyond its box, and blurring that needs m
     more of the unblurred background; the outer ring takes the cached blurred background instead.
@@ -295,21 +309,24 @@ def _draw_sphere(frame, camera, C, R, lighting, background, blur_sigma, noise_si
 
 
 def sphere_in_optical(P, ball, camera_rotation, camera_translation):
-    """The ball centre in the optical frame, from the effector position P and the ball (base frame, m).
+    """
+    Return the ball centre in the optical frame, from effector position P and ball (base frame, m).
 
     The optical centre is P + camera_translation (the effector frame is parallel to the base
     frame); the columns of camera_rotation are the optical axes in that frame.
     """
-    return np.asarray(camera_rotation, dtype=float).T @ (np.asarray(ball, dtype=float) - np.asarray(P, dtype=float)
-                                                         - np.asarray(camera_translation, dtype=float))
+    return np.asarray(camera_rotation, dtype=float).T @ (
+        np.asarray(ball, dtype=float) - np.asarray(P, dtype=float)
+        - np.asarray(camera_translation, dtype=float))
 
 
 class FrameClock:
-    """Which truth samples of the simulator the hand camera exposes: the first at or after each k / rate.
+    """
+    Which simulator truth samples the hand camera exposes: the first at or after each k / rate.
 
-    Samples come every few milliseconds (sim_motors' truth_decimation), so frames fall on them, 8 or
-    12 ms apart at 120 Hz with 4 ms samples, 120 per second on average. The hand camera ticking on
-    those samples and sim_motors' visual lockstep each keep one, and agree frame for frame.
+    Samples come every few milliseconds (sim_motors' truth_decimation), so frames fall on them, 8
+    or 12 ms apart at 120 Hz with 4 ms samples, 120 per second on average. The hand camera ticking
+    on those samples and sim_motors' visual lockstep each keep one, and agree frame for frame.
     """
 
     TOLERANCE = 1e-6    # s: stamps travel in whole nanoseconds and times add up in floating point
@@ -320,26 +337,30 @@ class FrameClock:
         self.rate, self.next = float(rate), 0.0
 
     def due(self, t):
-        """True if the sample at time t (s) is a frame; then the next deadline is the first after t."""
+        """Return True if the sample at t (s) is a frame; the next deadline is then past t."""
         if t < self.next - self.TOLERANCE:
             return False
         self.next = (np.floor((t + self.TOLERANCE) * self.rate) + 1) / self.rate
         return True
 
 
-def render_circles(camera, centres, normals, radii, rng, plate=230.0, ink=25.0, blur_sigma=0.8, noise_sigma=2.0):
-    """A mono8 image of filled discs (an ISO 9283 plate of black circles) in the optical frame.
-
-    centres (k, 3) and unit normals (k, 3) of the discs (m), radii (k,) (m). The plate fills the view
-    at brightness ``plate``; a disc is ``ink``. A pixel ray d meets a disc's plane at t d with
-    t = (n.c) / (n.d), inside it when |t d - c| < r; pixels within a pixel of a rim are supersampled
-    like the sphere's outline. Then blur, noise and 8 bits, over the whole frame.
+def render_circles(camera, centres, normals, radii, rng, plate=230.0, ink=25.0, blur_sigma=0.8,
+                   noise_sigma=2.0):
     """
-    centres, normals = np.atleast_2d(np.asarray(centres, float)), np.atleast_2d(np.asarray(normals, float))
+    Render a mono8 image of filled discs (an ISO 9283 plate of black circles) in the optical frame.
+
+    centres (k, 3) and unit normals (k, 3) of the discs (m), radii (k,) (m). The plate fills the
+    view at brightness ``plate``; a disc is ``ink``. A pixel ray d meets a disc's plane at t d with
+    t = (n.c) / (n.d), inside it when |t d - c| < r; pixels within a pixel of a rim are
+    supersampled like the sphere's outline. Then blur, noise and 8 bits, over the whole frame.
+    """
+    centres, normals = (np.atleast_2d(np.asarray(centres, float)),
+                        np.atleast_2d(np.asarray(normals, float)))
     radii = np.atleast_1d(np.asarray(radii, float))
-    if centres.shape[1:] != (3,) or normals.shape != centres.shape or radii.shape != (len(centres),):
-        raise ValueError(f'centres (k, 3), normals (k, 3) and radii (k,) must agree, got {centres.shape}, '
-                         f'{normals.shape}, {radii.shape}')
+    if (centres.shape[1:] != (3,) or normals.shape != centres.shape
+            or radii.shape != (len(centres),)):
+        raise ValueError('centres (k, 3), normals (k, 3) and radii (k,) must agree, '
+                         f'got {centres.shape}, {normals.shape}, {radii.shape}')
     if np.any(radii <= 0) or np.any(np.abs(np.linalg.norm(normals, axis=1) - 1) > 1e-6):
         raise ValueError('radii must be positive and normals unit vectors')
     cover = np.zeros((camera.height, camera.width), np.float32)
@@ -347,7 +368,8 @@ def render_circles(camera, centres, normals, radii, rng, plate=230.0, ink=25.0, 
         box = _disc_box(camera, c, n, r)
         if box is not None:
             u0, u1, v0, v1 = box
-            cover[v0:v1, u0:u1] = np.maximum(cover[v0:v1, u0:u1], _disc_coverage(camera, c, n, r, box))
+            cover[v0:v1, u0:u1] = np.maximum(cover[v0:v1, u0:u1],
+                                             _disc_coverage(camera, c, n, r, box))
     image = _blur(plate + (ink - plate) * cover, blur_sigma)
     if noise_sigma > 0:
         image += noise_sigma * rng.standard_normal(image.shape, dtype=np.float32)
@@ -368,12 +390,13 @@ def _disc_box(camera, c, n, r):
         return None
     uv = camera.project(rim)
     lo, hi = np.floor(uv.min(axis=0)).astype(int) - 2, np.ceil(uv.max(axis=0)).astype(int) + 3
-    u0, v0, u1, v1 = max(lo[0], 0), max(lo[1], 0), min(hi[0], camera.width), min(hi[1], camera.height)
+    u0, v0, u1, v1 = (max(lo[0], 0), max(lo[1], 0), min(hi[0], camera.width),
+                      min(hi[1], camera.height))
     return (u0, u1, v0, v1) if u0 < u1 and v0 < v1 else None
 
 
 def _disc_value(x, y, c, n, r):
-    """r^2 - |t d - c|^2 for rays d = (x, y, 1): positive inside the disc."""
+    """Return r^2 - |t d - c|^2 for rays d = (x, y, 1): positive inside the disc."""
     t = (n @ c) / (n[0] * x + n[1] * y + n[2])
     return r * r - ((t * x - c[0]) ** 2 + (t * y - c[1]) ** 2 + (t - c[2]) ** 2)
 
@@ -386,7 +409,9 @@ def _disc_coverage(camera, c, n, r, box):
     gq_v, gq_u = np.gradient(q)
     edge = np.abs(q / np.maximum(np.hypot(gq_u, gq_v), 1e-300)) < 0.8
     cover = (q > 0).astype(np.float32)
-    sx = x[edge][:, None] + _OFFSETS[:, 0] * dxy_du[edge][:, 0:1] + _OFFSETS[:, 1] * dxy_dv[edge][:, 0:1]
-    sy = y[edge][:, None] + _OFFSETS[:, 0] * dxy_du[edge][:, 1:2] + _OFFSETS[:, 1] * dxy_dv[edge][:, 1:2]
+    sx = (x[edge][:, None] + _OFFSETS[:, 0] * dxy_du[edge][:, 0:1]
+          + _OFFSETS[:, 1] * dxy_dv[edge][:, 0:1])
+    sy = (y[edge][:, None] + _OFFSETS[:, 0] * dxy_du[edge][:, 1:2]
+          + _OFFSETS[:, 1] * dxy_dv[edge][:, 1:2])
     cover[edge] = np.mean(_disc_value(sx, sy, c, n, r) > 0, axis=1)
     return cover

@@ -1,4 +1,5 @@
-"""The `hand_camera` node: the camera on the effector, looking at the ball (robotenis_sim.camera_model).
+"""
+The `hand_camera` node: the camera on the effector, seeing the ball (robotenis_sim.camera_model).
 
 Renders at ``rate`` (120 Hz, the paper's 8.34 ms) the ball as the camera sees it from the TRUE
 effector position (the latest sim/effector_position of sim_motors) and the truth file's camera
@@ -11,7 +12,8 @@ calibration ball, or (``ball: chaotic``) a Lorenz path at up to ``ball_max_speed
 about the calibration ball); its true position goes to sim/ball_position (PointStamped, base frame)
 for scoring. Timers follow the node's clock, so use_sim_time runs it on /clock. With
 ``tick_on_effector`` there is no timer: the frames are the first effector samples at or after each
-k / rate (camera_model.FrameClock), the same whatever the load; sim_motors' visual lockstep expects them.
+k / rate (camera_model.FrameClock), the same whatever the load; sim_motors' visual lockstep expects
+them.
 
 Parameters: the table PARAMETERS.
 """
@@ -34,8 +36,8 @@ from std_msgs.msg import Header
 CHAOTIC_HALF_SIZE = (0.12, 0.12, 0.08)   # m: the box of the chaotic path around the ball
 PARAMETERS = {
     'truth_path': ('', "the simulator's truth file (empty: robotenis_sim's default truth)"),
-    'rate': (120.0, 'Hz: frames (the paper\'s 8.34 ms)'),
-    'camera_info_path': ('', 'ROS camera_info YAML (empty: the vision package\'s '
+    'rate': (120.0, "Hz: frames (the paper's 8.34 ms)"),
+    'camera_info_path': ('', "ROS camera_info YAML (empty: the vision package's "
                              'hand_camera.yaml)'),
     'ball': ('fixed', "'fixed': the truth's calibration ball; 'chaotic': a Lorenz path"),
     'ball_max_speed': (1.5, 'm/s: top speed of the chaotic path'),
@@ -84,7 +86,8 @@ class HandCameraNode(Node):
             return sim_ball.FixedBall(tuple(self.truth.sphere_position))
         if p['ball'] != 'chaotic':
             raise ValueError(f"ball must be 'fixed' or 'chaotic', got {p['ball']!r}")
-        centre, half_size = (np.asarray(p[n], dtype=float) for n in ('ball_centre', 'ball_half_size'))
+        centre, half_size = (np.asarray(p[n], dtype=float)
+                             for n in ('ball_centre', 'ball_half_size'))
         max_speed, duration = float(p['ball_max_speed']), float(p['ball_path_duration'])
         if not (max_speed > 0 and duration > 0 and centre.shape == half_size.shape == (3,)
                 and np.all(half_size > 0)):

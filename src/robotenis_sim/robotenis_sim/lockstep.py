@@ -1,5 +1,5 @@
 """
-When the simulated motors step: on the wall clock, or in lockstep with the nodes that answer them.
+When the simulated motors step: on the wall clock, or in lockstep with the nodes answering them.
 
 * Wall clock: as many 1 ms steps as the wall time since the start asks (times ``speed`` on
   simulated time; ``speed`` 0 is as fast as possible), at most ``max_catch_up`` at once, so that a
@@ -12,8 +12,8 @@ When the simulated motors step: on the wall clock, or in lockstep with the nodes
   past an exposure plus ``visual_delay`` until a visual command stamped with it (or later) has
   arrived, waiting at most ``visual_timeout`` wall seconds: the visual loop then acts within
   visual_delay of simulated time, as a real camera pipeline acts within its frame. It waits only
-  while the loop answers: after a frame without an answer (ball lost, tracker off) it lets frames go
-  by unwaited until the next answer.
+  while the loop answers: after a frame without an answer (ball lost, tracker off) it lets frames
+  go by unwaited until the next answer.
 
 The clock is a parameter (``clock()``: wall seconds, monotonic), so the schedule can be tested
 without sleeping.
@@ -56,27 +56,27 @@ class StepSchedule:
         self.visual_since = None         # wall time the wait for a frame's command began
 
     def published(self):
-        """A reading went out: in lockstep, the next step waits for its command."""
+        """Record that a reading went out: in lockstep, the next step waits for its command."""
         self.answered = False
 
     def sampled(self, t):
-        """A truth sample at simulated time t went out: the camera may expose it."""
+        """Record that a truth sample at simulated time t went out: the camera may expose it."""
         if self.frames is not None and self.frames.due(t):
             self.exposures.append(t)
 
     def answer(self):
-        """The controller's command for the last reading arrived."""
+        """Record that the controller's command for the last reading arrived."""
         self.answered = True
 
     def visual_answer(self, t):
-        """A visual command stamped t arrived; True if a step was waiting for it."""
+        """Record a visual command stamped t arriving; return True if a step was waiting for it."""
         while self.exposures and self.exposures[0] <= t + FrameClock.TOLERANCE:
             self.exposures.popleft()
         self.visual_answers = True
         return self.visual_since is not None
 
     def due(self, t_sim, steps):
-        """(steps to run now, [notes for the log]) at simulated time t_sim after ``steps`` steps."""
+        """Return (steps to run now, [log notes]) at simulated time t_sim after ``steps`` steps."""
         n, notes = self._wall_due(steps), []
         if not (n and self.p.lockstep):
             return n, notes
@@ -99,7 +99,7 @@ class StepSchedule:
         return max(0, min(target - steps, self.p.max_catch_up))
 
     def _waiting_for_camera(self, t_sim, notes):
-        """True while the next step would pass a frame's deadline before its command."""
+        """Return True while the next step would pass a frame's deadline before its command."""
         deadline = t_sim + self.p.dt - self.p.visual_delay + 1e-9
         while self.exposures and self.exposures[0] <= deadline:
             if self.visual_answers:

@@ -1,11 +1,12 @@
-"""The simulated motors: the robot's rigid-body dynamics driven by velocity-command drives.
+"""
+The simulated motors: the robot's rigid-body dynamics driven by velocity-command drives.
 
 State: the TRUE arm angles alpha (absolute, rad) and rates. Every control period (1 ms) the drives
 hold the last velocity command and apply tau = K_V (alphad_ref - alphad) (dynamics paper, eq. 10),
 continuously, as a drive's inner loop runs much faster than the 1 kHz controller; the torque is
 clipped to what the servo and gearbox deliver. The equations of motion are the Lagrangian model of
-robotenis_control.dynamics (eqs. 1-9) in the independent coordinates alpha, integrated with classical
-RK4 (global error O(dt^4)); ``substeps`` splits the period.
+robotenis_control.dynamics (eqs. 1-9) in the independent coordinates alpha, integrated with
+classical RK4 (global error O(dt^4)); ``substeps`` splits the period.
 
 The resolvers report Theta = theta_motor - theta0, quantised to the counts of a resolver-to-digital
 converter on the motor shaft seen through the gearbox, with white noise before quantisation. The
@@ -14,8 +15,8 @@ backlash, compliance: the truth's effects, applied between the true joint and th
 
 Until the first velocity command the holding brakes are on and the robot does not move.
 """
-import math
 from dataclasses import dataclass
+import math
 
 import numpy as np
 
@@ -25,7 +26,8 @@ from robotenis_kinematics import delta
 
 @dataclass(frozen=True)
 class DriveParameters:
-    """K_V (N m s/rad, joint side, eq. 10) and the peak joint torque (N m) of servo + 10:1 gearbox.
+    """
+    K_V (N m s/rad, joint side, eq. 10) and the peak joint torque (N m) of servo + 10:1 gearbox.
 
     K_V = 60 gives the velocity loop a bandwidth K_V / I of about 200 rad/s on the ~0.3 kg m^2 a
     joint sees (arm, rotor, forearm and a third of the platform).
@@ -37,7 +39,8 @@ class DriveParameters:
 
 @dataclass(frozen=True)
 class ResolverParameters:
-    """Resolver counts per motor revolution, gear ratio, and the reading's noise (rad, joint side).
+    """
+    Resolver counts per motor revolution, gear ratio, and the reading's noise (rad, joint side).
 
     16384 counts (14-bit converter) through a 10:1 gearbox: one count is 2 pi / 163840 = 3.8e-5 rad
     at the joint, 0.019 mm at the end of a 0.5 m arm (calibration paper, section 6.1: the encoders
@@ -56,7 +59,8 @@ class ResolverParameters:
 
 
 def rk4_step(f, t, alpha, dalpha, dt):
-    """One classical Runge-Kutta step of alphadd = f(t, alpha, alphad) (lists of 3 floats).
+    """
+    Take one classical Runge-Kutta step of alphadd = f(t, alpha, alphad) (lists of 3 floats).
 
     Returns (alpha, alphad) at t + dt; local error O(dt^5), global O(dt^4).
     """
@@ -76,21 +80,24 @@ def rk4_step(f, t, alpha, dalpha, dt):
 
 
 class SimulatedMotors:
-    """The true robot with its drives and resolvers, stepped one control period at a time.
+    """
+    The true robot with its drives and resolvers, stepped one control period at a time.
 
     Parameters
     ----------
     geometry : RobotDescription-like (phi, H, a, b, h, theta0 arrays), the TRUE geometry.
     mass : robotenis_control.dynamics.MassParameters, the TRUE masses.
     Theta_start : resolver increments (rad) of the initial rest position; home by default.
-    joint_effects : callable (alpha, alphad) -> resolver increments before quantisation and noise (rad),
-        or None (alpha - theta0); e.g. robotenis_sim.truth.JointReadings.
+    joint_effects : callable (alpha, alphad) -> resolver increments before quantisation and noise
+        (rad), or None (alpha - theta0); e.g. robotenis_sim.truth.JointReadings.
+
     """
 
     def __init__(self, geometry, mass, drives=DriveParameters(), resolver=ResolverParameters(),
                  dt=1e-3, substeps=1, rng=None, Theta_start=(0.0, 0.0, 0.0), joint_effects=None):
         if dt <= 0 or substeps < 1:
-            raise ValueError(f"dt must be > 0 and substeps >= 1 (got dt={dt}, substeps={substeps})")
+            raise ValueError(f'dt must be > 0 and substeps >= 1 (got dt={dt}, '
+                             f'substeps={substeps})')
         self.model = SingleRobotDynamics(geometry, mass)
         self.theta0 = np.asarray(geometry.theta0, dtype=float)
         self.drives, self.resolver = drives, resolver
@@ -105,10 +112,10 @@ class SimulatedMotors:
         self._last_reading = self._quantised(self._increments())
 
     def set_command(self, dalpha_ref):
-        """Latch the drives' velocity command (rad/s, joint side); the first one releases the brakes."""
+        """Latch the drives' velocity command (rad/s, joint side); the first frees the brakes."""
         ref = [float(v) for v in dalpha_ref]
         if len(ref) != 3 or not all(math.isfinite(v) for v in ref):
-            raise ValueError(f"velocity command: expected three finite values, got {dalpha_ref!r}")
+            raise ValueError(f'velocity command: expected three finite values, got {dalpha_ref!r}')
         self.command = ref
         self.brakes = False
 
@@ -125,7 +132,8 @@ class SimulatedMotors:
         if not self.brakes:
             h = self.dt / self.substeps
             for k in range(self.substeps):
-                self.alpha, self.dalpha = rk4_step(self._accelerations, self.t + k * h, self.alpha, self.dalpha, h)
+                self.alpha, self.dalpha = rk4_step(self._accelerations, self.t + k * h,
+                                                   self.alpha, self.dalpha, h)
         self.t += self.dt
 
     def _increments(self):
@@ -139,16 +147,21 @@ class SimulatedMotors:
         return np.round(Theta / q) * q
 
     def read(self):
-        """(Theta, dTheta): resolver increments (rad, quantised and noisy) and the drives' speed
-        estimate, the difference of the last two readings over dt (rad/s)."""
-        noise = self.rng.normal(scale=self.resolver.noise, size=3) if self.resolver.noise > 0 else 0.0
+        """
+        Read the resolvers: (Theta, dTheta).
+
+        Theta: resolver increments (rad, quantised and noisy); dTheta: the drives' speed estimate,
+        the difference of the last two readings over dt (rad/s).
+        """
+        noise = (self.rng.normal(scale=self.resolver.noise, size=3) if self.resolver.noise > 0
+                 else 0.0)
         Theta = self._quantised(self._increments() + noise)
         dTheta = (Theta - self._last_reading) / self.dt
         self._last_reading = Theta
         return Theta, dTheta
 
     def effector(self):
-        """TRUE effector position and velocity (m, m/s, base frame): ground truth for scoring only."""
+        """Return the TRUE effector position and velocity (m, m/s, base frame): scoring only."""
         _, P, dP = self.model.accelerations(self.alpha, self.dalpha, [0.0, 0.0, 0.0])
         return np.array(P), np.array(dP)
 
@@ -194,7 +207,8 @@ class BatchMotors:
     def step(self):
         """Advance every robot one period, unless the brakes hold them."""
         if not self.brakes:
-            alpha, dalpha = rk4_step(self._accelerations, 0.0, self.alpha.T, self.dalpha.T, self.dt)
+            alpha, dalpha = rk4_step(self._accelerations, 0.0, self.alpha.T, self.dalpha.T,
+                                     self.dt)
             self.alpha, self.dalpha = np.asarray(alpha).T, np.asarray(dalpha).T
 
     def read(self):
@@ -211,10 +225,11 @@ class BatchMotors:
 
 
 def true_masses(truth):
-    """MassParameters of the real robot from the truth's static gravity load (arm, platform, kg).
+    """
+    Build the real robot's MassParameters from the truth's static gravity load (arm, platform, kg).
 
-    The forearm (1.315 kg) and the camera (0.05 kg) are as in the paper; the arm and platform masses
-    follow from arm = m_a/2 + m_b/2 and platform = m_c + m_camera + 3 m_b/2.
+    The forearm (1.315 kg) and the camera (0.05 kg) are as in the paper; the arm and platform
+    masses follow from arm = m_a/2 + m_b/2 and platform = m_c + m_camera + 3 m_b/2.
     """
     nominal = MassParameters()
     load = truth.gravity_load

@@ -1,30 +1,32 @@
 """
 Calibration bags as another driver would record them: a simulated static session, without ROS.
 
-The robot, camera and truth are the static session's (robotenis_sim.static_session): the declared
-description is the nominal one, the truth the simulator's default plus any undeclared effects, the
-poses the paper's (random, 5-10 cm from a singularity) among those where the camera sees the ball.
+The robot, camera and truth are the static session's (robotenis_sim.static_session): the
+declared description is the nominal one, the truth the simulator's default plus any undeclared
+effects, the poses the paper's (random, 5-10 cm from a singularity) among those where the camera
+sees the ball.
 The bag is written with the rosbags library alone (rosbag2 version 9, MCAP), not with the
 calibration package's writer, so that the calibration reads a bag it did not write. What this
 module adds to the static session is the time series a recorder stores:
 
 * /robot_description (std_msgs/String): the declared description, once at the start;
   /camera/camera_info once (the simulator's default camera).
-* /joint_states at ``joint_rate``: after ``IDLE`` s at home, the readings move to each rest along a
-  quintic profile (every joint monotone, as the static session assumes for backlash) and stay; each
-  sample is the reading plus the resolver's white noise, quantised to one count
+* /joint_states at ``joint_rate``: after ``IDLE`` s at home, the readings move to each rest along
+  a quintic profile (every joint monotone, as the static session assumes for backlash) and stay;
+  each sample is the reading plus the resolver's white noise, quantised to one count
   (robotenis_sim.motors.ResolverParameters).
 * /sphere/position at ``camera_rate`` from the arrival to the end of each rest: the true centre, a
   vibration of the ball holder decaying during the settle time, and per-frame noise: Table 3's
   standard deviation of a 500-frame average times sqrt(500) (robotenis_kinematics.synthetic).
-* /calibration/rest markers (optional) around the ``frames_per_pose`` frames after the settle time;
-  the robot leaves ``TAIL`` s after the end marker.
-* images (optional): ``images_per_pose`` frames of each rest, mono8 640x480 with 2 DN of sensor noise,
-  raw (sensor_msgs/Image on /camera/image_raw) or PNG (sensor_msgs/CompressedImage on
+* /calibration/rest markers (optional) around the ``frames_per_pose`` frames after the settle
+  time; the robot leaves ``TAIL`` s after the end marker.
+* images (optional): ``images_per_pose`` frames of each rest, mono8 640x480 with 2 DN of sensor
+  noise, raw (sensor_msgs/Image on /camera/image_raw) or PNG (sensor_msgs/CompressedImage on
   /camera/image_raw/compressed).
 
-Corruption, all optional: NaN and infinite values, false detections 1-5 mm off in a random direction,
-dropped messages, missing topics; ``truncate`` cuts the MCAP file as a dying recorder would.
+Corruption, all optional: NaN and infinite values, false detections 1-5 mm off in a random
+direction, dropped messages, missing topics; ``truncate`` cuts the MCAP file as a dying recorder
+would.
 """
 from dataclasses import dataclass, field
 import functools
@@ -39,13 +41,16 @@ from robotenis_sim import truth as sim_truth
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 
-FRAME_SIGMA = np.asarray(synthetic.NoiseModel().sigma_camera) * np.sqrt(500)   # m, one frame, optical axes
+# m, one frame, optical axes
+FRAME_SIGMA = np.asarray(synthetic.NoiseModel().sigma_camera) * np.sqrt(500)
 RESOLVER = motors.ResolverParameters()
 START_NS = 1_700_000_000 * 10 ** 9    # the session's first stamp, ns
 IDLE = 0.5                             # s at home before the first motion
 TAIL = 0.1                             # s still after the end marker, before the next motion
-MOVE_TIME = (0.3, 1.0)                 # s: a move takes 0.3 s plus 1 s per rad of the largest joint motion
-VIBRATION = (2e-4, 0.05, 12.0)         # ball holder after arrival: amplitude m, decay time s, frequency Hz
+# s: a move takes 0.3 s plus 1 s per rad of the largest joint motion
+MOVE_TIME = (0.3, 1.0)
+# ball holder after arrival: amplitude m, decay time s, frequency Hz
+VIBRATION = (2e-4, 0.05, 12.0)
 FALSE_OFFSET = (1e-3, 5e-3)            # m: how far off a false detection is
 LATENCY_NS = 300_000                   # recording time after the stamp, ns
 CAMERA = static_session.DEFAULT_CAMERA
@@ -83,8 +88,12 @@ class BagSpec:
 
 @dataclass
 class SimulatedBag:
-    """The bag written and what it should give: per rest, the noise-free readings (K, 3, rad), the true
-    sphere centre (K, 3, optical frame, m) and the measuring window between the markers (K, 2, s)."""
+    """
+    The bag written and what it should give.
+
+    Per rest: the noise-free readings (K, 3, rad), the true sphere centre (K, 3, optical frame, m)
+    and the measuring window between the markers (K, 2, s).
+    """
 
     path: str
     declared: object
@@ -95,7 +104,7 @@ class SimulatedBag:
 
 
 def plan(spec, batch=4000):
-    """Return the declared description, readings (K, 3) and true sphere centres (K, 3) of the rests."""
+    """Return the declared description, readings (K, 3) and true sphere centres (K, 3) of rests."""
     declared = description.nominal()
     truth = sim_truth.with_effects(sim_truth.load(), **spec.effects)
     rng = np.random.default_rng(spec.seed)
@@ -111,9 +120,13 @@ def plan(spec, batch=4000):
 
 
 def schedule(Theta, spec):
-    """Times (s from the start) of each rest: move start, arrival, start and end of the measurement,
-    departure (K, 5). Camera frames are at multiples of 1 / camera_rate; the measurement starts at the
-    first frame after the settle time and ends half a period after its last frame."""
+    """
+    Return the times (s from the start) of each rest (K, 5).
+
+    The times are: move start, arrival, start and end of the measurement, departure. Camera frames
+    are at multiples of 1 / camera_rate; the measurement starts at the first frame after the settle
+    time and ends half a period after its last frame.
+    """
     period = 1.0 / spec.camera_rate
     rows, t, previous = [], IDLE, np.zeros(3)
     for reading in Theta:
@@ -126,15 +139,16 @@ def schedule(Theta, spec):
 
 
 def frames(t0, t1, spec):
-    """Frame times of the camera clock in [t0, t1] (s)."""
+    """Return the frame times of the camera clock in [t0, t1] (s)."""
     period = 1.0 / spec.camera_rate
     return np.arange(np.ceil(t0 / period - 1e-6), np.floor(t1 / period + 1e-6) + 1) * period
 
 
 def readings(t, Theta, times):
-    """Noise-free readings (n, 3) at times t: quintic moves (10 s^3 - 15 s^4 + 6 s^5) between rests."""
+    """Return noise-free readings at t, (n, 3): moves 10 s^3 - 15 s^4 + 6 s^5 between rests."""
     starts = np.concatenate([[-np.inf], times[:, 0]])
-    k = np.searchsorted(starts, t, side='right') - 1       # 0: idle at home; k: moving to or at rest k
+    # 0: idle at home; k: moving to or at rest k
+    k = np.searchsorted(starts, t, side='right') - 1
     frm = np.vstack([np.zeros((2, 3)), Theta])[k]          # where the move to rest k started
     to = np.vstack([np.zeros((1, 3)), Theta])[k]
     start = np.concatenate([[0.0], times[:, 0]])[k]
@@ -145,18 +159,19 @@ def readings(t, Theta, times):
 
 @functools.lru_cache(maxsize=1)
 def typestore():
-    """ROS 2 Jazzy's types and robotenis_interfaces/RestMarker (from the installed interfaces)."""
+    """Build the ROS 2 Jazzy typestore with robotenis_interfaces/RestMarker (installed .msg)."""
     from ament_index_python.packages import get_package_share_directory
     store = get_typestore(Stores.ROS2_JAZZY)
     name = 'robotenis_interfaces/msg/RestMarker'
-    path = os.path.join(get_package_share_directory('robotenis_interfaces'), 'msg', 'RestMarker.msg')
+    path = os.path.join(get_package_share_directory('robotenis_interfaces'), 'msg',
+                        'RestMarker.msg')
     with open(path) as f:
         store.register(get_types_from_msg(f.read(), name))
     return store
 
 
 def png(pixels):
-    """Lossless PNG bytes of a mono8 image."""
+    """Encode a mono8 image as lossless PNG bytes."""
     ok, data = cv2.imencode('.png', pixels)
     assert ok, 'OpenCV could not encode a mono8 image as PNG'
     return data.tobytes()
@@ -172,12 +187,14 @@ class _Messages:
     def header(self, t, frame_id=''):
         ns = START_NS + int(round(t * 1e9))
         return self.types['std_msgs/msg/Header'](
-            stamp=self.types['builtin_interfaces/msg/Time'](sec=ns // 10 ** 9, nanosec=ns % 10 ** 9), frame_id=frame_id)
+            stamp=self.types['builtin_interfaces/msg/Time'](sec=ns // 10 ** 9,
+                                                            nanosec=ns % 10 ** 9),
+            frame_id=frame_id)
 
     def joint_state(self, t, position):
         return self.types['sensor_msgs/msg/JointState'](
-            header=self.header(t), name=['motor_1', 'motor_2', 'motor_3'], position=np.asarray(position, dtype=float),
-            velocity=np.zeros(0), effort=np.zeros(0))
+            header=self.header(t), name=['motor_1', 'motor_2', 'motor_3'],
+            position=np.asarray(position, dtype=float), velocity=np.zeros(0), effort=np.zeros(0))
 
     def point(self, t, p):
         Point = self.types['geometry_msgs/msg/Point']
@@ -185,17 +202,18 @@ class _Messages:
                                                             point=Point(x=p[0], y=p[1], z=p[2]))
 
     def marker(self, t, index, start):
-        return self.types['robotenis_interfaces/msg/RestMarker'](header=self.header(t), pose_index=index, start=start)
+        return self.types['robotenis_interfaces/msg/RestMarker'](header=self.header(t),
+                                                                 pose_index=index, start=start)
 
     def camera_info(self, t):
         c = CAMERA
         K = np.array([c['fx'], 0, c['cx'], 0, c['fy'], c['cy'], 0, 0, 1], dtype=float)
-        roi = self.types['sensor_msgs/msg/RegionOfInterest'](x_offset=0, y_offset=0, height=0, width=0,
-                                                             do_rectify=False)
+        roi = self.types['sensor_msgs/msg/RegionOfInterest'](x_offset=0, y_offset=0, height=0,
+                                                             width=0, do_rectify=False)
         return self.types['sensor_msgs/msg/CameraInfo'](
-            header=self.header(t, self.frame_id), height=c['height'], width=c['width'], distortion_model='plumb_bob',
-            d=np.zeros(5), k=K, r=np.eye(3).ravel(), p=np.insert(K.reshape(3, 3), 3, 0, axis=1).ravel(),
-            binning_x=0, binning_y=0, roi=roi)
+            header=self.header(t, self.frame_id), height=c['height'], width=c['width'],
+            distortion_model='plumb_bob', d=np.zeros(5), k=K, r=np.eye(3).ravel(),
+            p=np.insert(K.reshape(3, 3), 3, 0, axis=1).ravel(), binning_x=0, binning_y=0, roi=roi)
 
     def image(self, t, pixels, compressed):
         if compressed:
@@ -203,23 +221,25 @@ class _Messages:
                 header=self.header(t, self.frame_id), format=PNG_FORMAT,
                 data=np.frombuffer(png(pixels), dtype=np.uint8))
         h, w = pixels.shape
-        return self.types['sensor_msgs/msg/Image'](header=self.header(t, self.frame_id), height=h, width=w,
-                                                   encoding='mono8', is_bigendian=0, step=w, data=pixels.ravel())
+        return self.types['sensor_msgs/msg/Image'](
+            header=self.header(t, self.frame_id), height=h, width=w, encoding='mono8',
+            is_bigendian=0, step=w, data=pixels.ravel())
 
 
 def render(sphere, radius, rng):
-    """A mono8 frame of the hand camera: the ball (shaded disc) on a dark background, 2 DN of noise."""
+    """Render a hand camera mono8 frame: ball (shaded disc) on a dark background, 2 DN of noise."""
     x, y, z = sphere
     u, v = CAMERA['fx'] * x / z + CAMERA['cx'], CAMERA['fy'] * y / z + CAMERA['cy']
     r = CAMERA['fx'] * radius / z
     vv, uu = np.mgrid[0:CAMERA['height'], 0:CAMERA['width']]
     rho2 = ((uu - u) ** 2 + (vv - v) ** 2) / r ** 2
-    image = 40.0 + 150.0 * np.sqrt(np.clip(1.0 - rho2, 0.0, 1.0)) + rng.normal(scale=2.0, size=rho2.shape)
+    image = (40.0 + 150.0 * np.sqrt(np.clip(1.0 - rho2, 0.0, 1.0))
+             + rng.normal(scale=2.0, size=rho2.shape))
     return np.clip(np.round(image), 0, 255).astype(np.uint8)
 
 
 def corrupt(values, spec, rng, false_offsets=True):
-    """NaN / infinite values and (for sphere positions) false detections, in place; the kept mask."""
+    """Corrupt in place: NaN/inf, false detections (sphere positions); return the kept mask."""
     n = len(values)
     bad = rng.random(n) < spec.nan_fraction
     values[bad] = np.where(rng.random((int(bad.sum()), 1)) < 0.5, np.nan, np.inf)
@@ -232,14 +252,17 @@ def corrupt(values, spec, rng, false_offsets=True):
 
 
 def image_topic(spec):
-    """Where the simulated images go: PNG on .../compressed, raw otherwise."""
+    """Return where the simulated images go: PNG on .../compressed, raw otherwise."""
     return '/camera/image_raw/compressed' if spec.compressed_images else '/camera/image_raw'
 
 
 def _joint_states(t0, t1, Theta, times, spec, msgs, rngs):
-    """(time, topic, message) of the joint states in [t0, t1): quantised noisy readings, corrupted.
-    ``rngs``: generators of the noise and of the corruption (separate, so that a corrupted bag has the
-    noise of the clean one)."""
+    """
+    Return (time, topic, message) of joint states in [t0, t1): quantised noisy readings, corrupted.
+
+    ``rngs``: generators of the noise and of the corruption (separate, so that a corrupted bag has
+    the noise of the clean one).
+    """
     rng, bad_rng = rngs
     t = np.arange(np.ceil(t0 * spec.joint_rate), np.ceil(t1 * spec.joint_rate)) / spec.joint_rate
     raw = readings(t, Theta, times) + rng.normal(scale=RESOLVER.noise, size=(len(t), 3))
@@ -249,13 +272,14 @@ def _joint_states(t0, t1, Theta, times, spec, msgs, rngs):
 
 
 def _rest(k, times, sphere, spec, msgs, rngs, radius):
-    """(time, topic, message) of rest k's camera frames, markers and images."""
+    """Return (time, topic, message) of rest k's camera frames, markers and images."""
     rng, bad_rng = rngs
     tf = frames(times[k, 1], times[k, 3], spec)
     a, tau, f = VIBRATION
     axis = rng.normal(size=3)
     shake = a * np.exp(-(tf - times[k, 1]) / tau) * np.sin(2 * np.pi * f * (tf - times[k, 1]))
-    p = sphere[k] + shake[:, None] * axis / np.linalg.norm(axis) + rng.normal(size=(len(tf), 3)) * FRAME_SIGMA
+    p = (sphere[k] + shake[:, None] * axis / np.linalg.norm(axis)
+         + rng.normal(size=(len(tf), 3)) * FRAME_SIGMA)
     keep = corrupt(p, spec, bad_rng)
     out = [(ti, '/sphere/position', msgs.point(ti, pi)) for ti, pi, ok in zip(tf, p, keep) if ok]
     if spec.markers:
@@ -263,14 +287,17 @@ def _rest(k, times, sphere, spec, msgs, rngs, radius):
                 (times[k, 3], '/calibration/rest', msgs.marker(times[k, 3], k, False))]
     if spec.images_per_pose:
         measured = frames(times[k, 2], times[k, 3], spec)
-        for ti in measured[np.linspace(0, len(measured) - 1, spec.images_per_pose).round().astype(int)]:
-            out.append((ti, image_topic(spec), msgs.image(ti, render(sphere[k], radius, rng), spec.compressed_images)))
+        picked = np.linspace(0, len(measured) - 1, spec.images_per_pose).round().astype(int)
+        for ti in measured[picked]:
+            out.append((ti, image_topic(spec),
+                        msgs.image(ti, render(sphere[k], radius, rng), spec.compressed_images)))
     return out
 
 
 def _segments(declared, Theta, sphere, times, spec, msgs, rngs):
-    """Lists of (time, topic, message): the idle start, then each move with its rest."""
-    yield [(0.0, '/robot_description', msgs.types['std_msgs/msg/String'](data=description.dumps(declared))),
+    """Yield lists of (time, topic, message): the idle start, then each move with its rest."""
+    robot_description = msgs.types['std_msgs/msg/String'](data=description.dumps(declared))
+    yield [(0.0, '/robot_description', robot_description),
            (0.0, '/camera/camera_info', msgs.camera_info(0.0))] + \
         _joint_states(0.0, times[0, 0], Theta, times, spec, msgs, rngs)
     for k in range(len(Theta)):
@@ -279,13 +306,18 @@ def _segments(declared, Theta, sphere, times, spec, msgs, rngs):
 
 
 def write(path, spec=BagSpec(), progress=None):
-    """Simulate a session and record it to the new bag directory ``path``; returns a SimulatedBag.
-    ``progress(k, K)`` is called after each rest."""
+    """
+    Simulate a session and record it to the new bag directory ``path``; return a SimulatedBag.
+
+    ``progress(k, K)`` is called after each rest.
+    """
     declared, Theta, sphere = plan(spec)
     rngs = (np.random.default_rng(spec.seed + 1), np.random.default_rng(spec.seed + 2))
     times = schedule(Theta, spec)
-    topics = [t for t in TOPICS if t not in spec.omit and (t != '/calibration/rest' or spec.markers)
-              and (not t.startswith('/camera/image') or (spec.images_per_pose and t == image_topic(spec)))]
+    topics = [t for t in TOPICS
+              if t not in spec.omit and (t != '/calibration/rest' or spec.markers)
+              and (not t.startswith('/camera/image')
+                   or (spec.images_per_pose and t == image_topic(spec)))]
     counts = dict.fromkeys(topics, 0)
     store = typestore()
     bag = Writer(Path(path), version=9, storage_plugin=StoragePlugin.MCAP)
@@ -304,12 +336,16 @@ def write(path, spec=BagSpec(), progress=None):
                 progress(k, len(Theta))
     finally:
         bag.close()
-    return SimulatedBag(str(path), declared, Theta, sphere, times[:, 2:4] + START_NS * 1e-9, counts)
+    return SimulatedBag(str(path), declared, Theta, sphere, times[:, 2:4] + START_NS * 1e-9,
+                        counts)
 
 
 def truncate(bag_dir, keep_fraction, drop_metadata=False):
-    """Cut the bag's MCAP file to ``keep_fraction`` of its size (and remove metadata.yaml if asked),
-    as when the recording process dies."""
+    """
+    Cut the bag's MCAP file to ``keep_fraction`` of its size, as when the recording process dies.
+
+    With ``drop_metadata``, metadata.yaml is removed too.
+    """
     bag = Path(bag_dir)
     (mcap,) = bag.glob('*.mcap')
     with open(mcap, 'r+b') as f:

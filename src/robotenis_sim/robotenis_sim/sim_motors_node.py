@@ -1,13 +1,14 @@
-"""The `sim_motors` node: the simulated robot behind the drives and resolvers (robotenis_sim.motors).
+"""
+The `sim_motors` node: the simulated robot behind the drives and resolvers (robotenis_sim.motors).
 
-Subscribes motor_velocity_cmd (JointState velocity, motor_1..3, rad/s at the joints) and publishes
-joint_states at ``rate`` (position = resolver increment from home, rad; velocity = the drives' speed
-estimate, rad/s). Ground truth, for scoring only, goes to sim/effector_position (PointStamped,
-base frame, m) every ``truth_decimation`` steps (default 4: 250 Hz, faster than the 120 Hz camera
-that renders from it).
+Subscribes motor_velocity_cmd (JointState velocity, motor_1..3, rad/s at the joints) and
+publishes joint_states at ``rate`` (position = resolver increment from home, rad; velocity = the
+drives' speed estimate, rad/s). Ground truth, for scoring only, goes to sim/effector_position
+(PointStamped, base frame, m) every ``truth_decimation`` steps (default 4: 250 Hz, faster than the
+120 Hz camera that renders from it).
 
-The true geometry and masses come from the truth file (``truth_path``; the default truth when empty)
-or, if ``description_path`` is set, from a robot description with nominal masses.
+The true geometry and masses come from the truth file (``truth_path``; the default truth when
+empty) or, if ``description_path`` is set, from a robot description with nominal masses.
 
 Clock modes (robotenis_sim.lockstep): wall (default), a steady timer running the steps due; or
 simulated (``publish_clock``): the node owns /clock and publishes the simulated time every
@@ -44,7 +45,7 @@ PARAMETERS = {
     'resolver_noise': (motors.ResolverParameters.noise, 'rad: white noise of a reading'),
     'resolver_counts': (motors.ResolverParameters.counts_per_rev, 'counts per motor revolution'),
     'gear_ratio': (motors.ResolverParameters.gear_ratio, 'motor turns per joint turn'),
-    'kv': (motors.DriveParameters.K_V, 'N m s/rad: the drives\' velocity gain (eq. 10)'),
+    'kv': (motors.DriveParameters.K_V, "N m s/rad: the drives' velocity gain (eq. 10)"),
     'torque_limit': (motors.DriveParameters.torque_limit, 'N m: peak joint torque'),
     'seed': (-1, 'random seed of the resolver noise (-1: random)'),
     'publish_clock': (False, 'own /clock: run on simulated time'),
@@ -56,7 +57,7 @@ PARAMETERS = {
     'max_catch_up': (10, 'most steps run at once on the wall clock'),
     'camera_rate': (0.0, 'Hz: visual lockstep on the frames of this rate (0: off)'),
     'visual_delay': (1.0 / 120.0, 's: a frame must be answered within this simulated time'),
-    'visual_timeout': (0.1, 'wall s to wait for a frame\'s command'),
+    'visual_timeout': (0.1, "wall s to wait for a frame's command"),
 }
 
 
@@ -86,7 +87,8 @@ class SimMotorsNode(Node):
         self.clock_decimation = max(1, int(p['clock_decimation']))
         self.joint_pub = self.create_publisher(JointState, 'joint_states', 10)
         self.truth_pub = self.create_publisher(PointStamped, 'sim/effector_position', 10)
-        self.clock_pub = self.create_publisher(ClockMsg, '/clock', 10) if self.publish_clock else None
+        self.clock_pub = (self.create_publisher(ClockMsg, '/clock', 10) if self.publish_clock
+                          else None)
         self.create_subscription(JointState, 'motor_velocity_cmd', self.on_command, 10)
         if self.schedule.frames is not None:
             self.create_subscription(TwistStamped, 'cmd_vel_cartesian', self.on_visual_command, 10)
@@ -108,8 +110,10 @@ class SimMotorsNode(Node):
         truth = sim_truth.load(truth_path or None)
         joint = set(truth.effects) & {'joint_scale', 'backlash', 'gravity_compliance'}
         if joint:
-            self.get_logger().info(f"undeclared joint effects simulated: {', '.join(sorted(joint))}")
-        return truth.geometry, true_masses(truth), sim_truth.JointReadings(truth) if joint else None
+            self.get_logger().info('undeclared joint effects simulated: '
+                                   f"{', '.join(sorted(joint))}")
+        return (truth.geometry, true_masses(truth),
+                sim_truth.JointReadings(truth) if joint else None)
 
     def stamp(self):
         if self.publish_clock:

@@ -1,4 +1,5 @@
-"""A calibration session without dynamics: what the robot reports at each rest, from the truth.
+"""
+A calibration session without dynamics: what the robot reports at each rest, from the truth.
 
 The live session (motion controller, motors, hand camera, detector) takes minutes; the residual
 loop's statistics need hundreds of sessions. This module produces the same averaged measurements
@@ -7,9 +8,10 @@ the live session's rests give, from the same truth models:
 * the controller brings the resolver readings to the command IK_declared(P_cmd) - theta0_declared
   (the robot only knows its declared model), so the readings are the command plus resolver noise;
 * the motors sit where the readings say (gear-ratio error), the arms lag them by the backlash
-  against the last motion (each joint moves monotonically between rests here) and sag under gravity;
-* the effector is where the TRUE geometry puts those arm angles, and the hand camera, mounted at its
-  true rotation and offset, sees the ball there, with the averaged-detection noise of Table 3.
+  against the last motion (each joint moves monotonically between rests here) and sag under
+  gravity;
+* the effector is where the TRUE geometry puts those arm angles, and the hand camera, mounted at
+  its true rotation and offset, sees the ball there, with the averaged-detection noise of Table 3.
 
 Rests where the ball is out of the camera's view or range are skipped, as the live session would.
 """
@@ -23,7 +25,7 @@ MARGIN_PX = 40         # keep the ball's image this far inside the frame
 
 
 def visible(sphere, camera=DEFAULT_CAMERA, radius=0.0095):
-    """Mask (K,) of sphere centres (optical frame, m) the camera sees whole and within range."""
+    """Return the mask (K,) of sphere centres (optical frame, m) the camera sees whole in range."""
     x, y, z = np.asarray(sphere, dtype=float).T
     ok = (z >= RANGE[0]) & (z <= RANGE[1])
     zs = np.where(ok, z, 1.0)
@@ -35,12 +37,12 @@ def visible(sphere, camera=DEFAULT_CAMERA, radius=0.0095):
 
 
 def sphere_in_camera(truth, P):
-    """Sphere centre in the true optical frame (K, 3) for effector positions P (K, 3)."""
+    """Return sphere centres in the true optical frame (K, 3) for effector positions P (K, 3)."""
     return (truth.sphere_position - P - truth.camera_translation) @ truth.camera_rotation
 
 
 def rest_positions(truth, declared, P_cmd):
-    """Readings (K, 3) and true effector positions (K, 3) at rest after visiting P_cmd in order."""
+    """Return readings and true effector positions (K, 3) at rest after visiting P_cmd in order."""
     Theta = delta.inverse(declared, P_cmd) - declared.theta0
     motor = truth.motor_from_reading(Theta)
     arm = truth.arm_angles(motor, effects.motion_direction(Theta))
@@ -48,14 +50,16 @@ def rest_positions(truth, declared, P_cmd):
 
 
 def run(truth, declared, P_cmd, noise, rng, camera=DEFAULT_CAMERA):
-    """Averaged measurements of a static session over the commanded positions P_cmd (K, 3).
+    """
+    Simulate the averaged measurements of a static session over commanded positions P_cmd (K, 3).
 
     Returns (Theta, sigma_Theta, sphere, sphere_cov, kept): readings with noise, the sphere centres
     seen by the camera with noise, and the indices of P_cmd whose rest gave a measurement.
     ``noise`` is a robotenis_kinematics.synthetic.NoiseModel (sigma_camera along the optical axes).
     """
     P_cmd = np.asarray(P_cmd, dtype=float)
-    kept = np.flatnonzero(visible(sphere_in_camera(truth, rest_positions(truth, declared, P_cmd)[1]), camera))
+    P_rest = rest_positions(truth, declared, P_cmd)[1]
+    kept = np.flatnonzero(visible(sphere_in_camera(truth, P_rest), camera))
     # Visit only what the camera sees: the motion directions follow the poses actually visited.
     Theta, P = rest_positions(truth, declared, P_cmd[kept])
     sphere = sphere_in_camera(truth, P)

@@ -1,30 +1,34 @@
-"""The simulator's truth: the real geometry and the effects no robot description declares.
+"""
+The simulator's truth: the real geometry and the effects no robot description declares.
 
 Read by the simulator only. A truth file is YAML::
 
-    geometry: {legs: ..., camera: ..., sphere_radius: ...}   # robot description schema: the TRUE geometry
-                                             # (or a description file: a path relative to the truth
-                                             # file, or package://PACKAGE/PATH in a package's share)
-    camera_translation: [0.12, 0.0, 0.04]   # optical centre in the effector frame, m
-    sphere_position: [0.70, 0.0, 1.35]      # centre of the fixed calibration ball, base frame, m
-    effects:                                 # all optional, none on by default
-      joint_scale: [s1, s2, s3]              # gear ratio error: reading = (1 + s_i) (motor - theta0)
-      backlash: [w1, w2, w3]                 # rad: the arm lags the motor by w_i / 2 against the last motion
-      gravity_compliance: [c1, c2, c3]       # rad/(N m): the arm sags by c_i tau_g,i under gravity torque
+    geometry: {legs: ..., camera: ..., sphere_radius: ...}  # robot description schema: the TRUE
+                                           # geometry (or a description file: a path relative to
+                                           # the truth file, or package://PACKAGE/PATH in a
+                                           # package's share)
+    camera_translation: [0.12, 0.0, 0.04]  # optical centre in the effector frame, m
+    sphere_position: [0.70, 0.0, 1.35]     # centre of the fixed calibration ball, base frame, m
+    effects:                               # all optional, none on by default
+      joint_scale: [s1, s2, s3]            # gear ratio error: reading = (1 + s_i) (motor - theta0)
+      backlash: [w1, w2, w3]               # rad: the arm lags the motor by w_i / 2 against the
+                                           # last motion
+      gravity_compliance: [c1, c2, c3]     # rad/(N m): the arm sags by c_i tau_g,i under gravity
+                                           # torque
       base_geometry: {dH: [...], dphi: [...]}  # m, rad: motor axes off the declared H_i, phi_i
-      hand_eye_rotation: [rx, ry, rz]        # rad, rotation vector: true camera mount = declared R exp([r])
+      hand_eye_rotation: [rx, ry, rz]      # rad, rotation vector: true camera mount = declared
+                                           # R exp([r])
 
-The geometry defaults to the calibration paper's Table 1 calibrated column (``truth_default.yaml``),
-so that nominal and truth differ as on the real robot.
+The geometry defaults to the calibration paper's Table 1 calibrated column
+(``truth_default.yaml``), so that nominal and truth differ as on the real robot.
 """
-import os
 from dataclasses import dataclass, field
+import os
 
 import numpy as np
-import yaml
-
 from robotenis_kinematics import delta, description, effects as model_effects
 from robotenis_kinematics.description import DescriptionError
+import yaml
 
 EFFECTS = ('joint_scale', 'backlash', 'gravity_compliance', 'base_geometry', 'hand_eye_rotation')
 G = model_effects.G
@@ -33,7 +37,8 @@ rotation_vector_matrix = model_effects.rotation_vector_matrix
 
 @dataclass(frozen=True)
 class GravityLoad:
-    """Static gravity load of the real robot (kg): what each arm carries and what the platform weighs.
+    """
+    Static gravity load of the real robot (kg): what each arm carries, what the platform weighs.
 
     arm: arm mass at half the arm plus half a forearm at the elbow (m_a / 2 + m_b / 2);
     platform: platform, camera and the other halves of the three forearms (m_c + 3 m_b / 2).
@@ -57,23 +62,26 @@ class Truth:
 
     @property
     def camera_rotation(self):
-        """True camera mounting: the declared rotation turned by hand_eye_rotation, if any."""
+        """Return the true camera mount: the declared rotation turned by any hand_eye_rotation."""
         r = np.asarray(self.effects.get('hand_eye_rotation', np.zeros(3)), dtype=float)
         return rotation_vector_matrix(r) @ self.geometry.camera_rotation
 
     def gravity_torque(self, P, theta):
-        """Torque (..., 3) that gravity applies to the arms at rest (N m, positive = arm down)."""
+        """Return the gravity torque (..., 3) on the arms at rest (N m, positive = arm down)."""
         load = {'arm': self.gravity_load.arm, 'platform': self.gravity_load.platform}
         return model_effects.gravity_torque(self.geometry, P, theta, load)
 
     def arm_angles(self, motor, direction, P=None):
-        """True arm angles (..., 3) for motor angles (absolute, rad) after motion in ``direction``.
-
-        ``direction`` is the sign (+1/-1) of each motor's last motion; backlash leaves the arm behind
-        the motor by half its width. Compliance needs the pose: it is solved by fixed point (the sag is
-        small, so two passes converge to well below a resolver count).
         """
-        theta = np.asarray(motor, dtype=float) - 0.5 * np.asarray(self.effects.get('backlash', np.zeros(3))) * direction
+        Return the true arm angles (..., 3) for motor angles after motion in ``direction``.
+
+        ``motor`` is absolute, rad. ``direction`` is the sign (+1/-1) of each motor's last motion;
+        backlash leaves the arm behind the motor by half its width. Compliance needs the pose: it
+        is solved by fixed point (the sag is small, so two passes converge to well below a
+        resolver count).
+        """
+        theta = (np.asarray(motor, dtype=float)
+                 - 0.5 * np.asarray(self.effects.get('backlash', np.zeros(3))) * direction)
         c = np.asarray(self.effects.get('gravity_compliance', np.zeros(3)), dtype=float)
         if not np.any(c):
             return theta
@@ -84,7 +92,8 @@ class Truth:
         return sagged
 
     def increments(self, arm, direction, P):
-        """Resolver increments (before quantisation and noise) for TRUE arm angles at effector P.
+        """
+        Return resolver increments, unquantised and noise-free, for TRUE arm angles at effector P.
 
         The exact inverse of ``arm_angles`` followed by ``reading``: the sag is c_i tau_g,i at the
         sagged pose itself, and the motor leads the arm by half the backlash in ``direction``.
@@ -97,12 +106,12 @@ class Truth:
         return self.reading(motor)
 
     def reading(self, motor):
-        """Resolver increments the drives report for motor angles (absolute): gear-ratio error applied."""
+        """Return the drives' increments for motor angles (absolute), gear-ratio error applied."""
         s = np.asarray(self.effects.get('joint_scale', np.zeros(3)), dtype=float)
         return (1 + s) * (np.asarray(motor, dtype=float) - self.geometry.theta0)
 
     def motor_from_reading(self, Theta):
-        """Motor angles (absolute) for resolver increments: the inverse of ``reading``."""
+        """Return motor angles (absolute) for resolver increments: the inverse of ``reading``."""
         s = np.asarray(self.effects.get('joint_scale', np.zeros(3)), dtype=float)
         return self.geometry.theta0 + np.asarray(Theta, dtype=float) / (1 + s)
 
@@ -110,12 +119,12 @@ class Truth:
 def _vector(value, key, n=3):
     arr = np.asarray(value, dtype=float) if isinstance(value, list) else None
     if arr is None or arr.shape != (n,) or not np.all(np.isfinite(arr)):
-        raise DescriptionError(f"{key}: expected {n} finite numbers, got {value!r}")
+        raise DescriptionError(f'{key}: expected {n} finite numbers, got {value!r}')
     return arr
 
 
 def geometry_file(name, folder):
-    """Return the path of a geometry given by file: package://PACKAGE/PATH, or relative to folder."""
+    """Return the path of a geometry file: package://PACKAGE/PATH, or relative to ``folder``."""
     if name.startswith('package://'):
         from ament_index_python.packages import get_package_share_directory
         package, _, rest = name[len('package://'):].partition('/')
@@ -124,20 +133,21 @@ def geometry_file(name, folder):
 
 
 def from_dict(data, folder='.'):
-    """Truth from parsed YAML (files it names are relative to ``folder``); errors name the key."""
+    """Build a Truth from parsed YAML, its files relative to ``folder``; errors name the key."""
     if not isinstance(data, dict) or 'geometry' not in data:
-        raise DescriptionError("truth: geometry: missing key")
+        raise DescriptionError('truth: geometry: missing key')
     try:
         if isinstance(data['geometry'], str):
             geometry = description.load(geometry_file(data['geometry'], folder))
         else:
             geometry = description.from_dict(data['geometry'])
     except DescriptionError as e:
-        raise DescriptionError(f"geometry.{e}") from None
+        raise DescriptionError(f'geometry.{e}') from None
     effects = dict(data.get('effects') or {})
     for name in effects:
         if name not in EFFECTS:
-            raise DescriptionError(f"effects.{name}: unknown effect (known: {', '.join(EFFECTS)})")
+            raise DescriptionError(f'effects.{name}: unknown effect '
+                                   f"(known: {', '.join(EFFECTS)})")
     parsed = {}
     for name, value in effects.items():
         if name == 'base_geometry':
@@ -149,7 +159,7 @@ def from_dict(data, folder='.'):
             parsed[name] = _vector(value, f'effects.{name}')
     for key in ('camera_translation', 'sphere_position'):
         if key not in data:
-            raise DescriptionError(f"{key}: missing key")
+            raise DescriptionError(f'{key}: missing key')
     return Truth(geometry, _vector(data['camera_translation'], 'camera_translation'),
                  _vector(data['sphere_position'], 'sphere_position'), parsed)
 
@@ -161,24 +171,26 @@ def load(path=None):
         try:
             data = yaml.safe_load(f)
         except yaml.YAMLError as e:
-            raise DescriptionError(f"{path}: not valid YAML ({e})") from e
+            raise DescriptionError(f'{path}: not valid YAML ({e})') from e
     try:
         return from_dict(data, os.path.dirname(os.path.abspath(path)))
     except DescriptionError as e:
-        raise DescriptionError(f"{path}: {e}") from None
+        raise DescriptionError(f'{path}: {e}') from None
 
 
 def to_dict(truth, **effects):
-    """Plain data of a truth file for ``truth``, with ``effects`` added."""
-    data = {'geometry': truth.geometry.to_dict(), 'camera_translation': truth.camera_translation.tolist(),
+    """Return the plain data of a truth file for ``truth``, with ``effects`` added."""
+    data = {'geometry': truth.geometry.to_dict(),
+            'camera_translation': truth.camera_translation.tolist(),
             'sphere_position': truth.sphere_position.tolist(),
             # base_geometry is already in the geometry: carrying it again would apply it twice
-            'effects': {**{k: v for k, v in truth.effects.items() if k != 'base_geometry'}, **effects}}
+            'effects': {**{k: v for k, v in truth.effects.items() if k != 'base_geometry'},
+                        **effects}}
     return _plain(data)
 
 
 def with_effects(truth, **effects):
-    """A copy of ``truth`` with effects added (as a truth file would give them)."""
+    """Return a copy of ``truth`` with effects added (as a truth file would give them)."""
     return from_dict(yaml.safe_load(yaml.safe_dump(to_dict(truth, **effects))))
 
 
@@ -186,7 +198,7 @@ def save(truth, path):
     """Write a truth file (temporary file, then rename)."""
     tmp = f'{path}.tmp'
     with open(tmp, 'w') as f:
-        f.write('# The simulator\'s truth: read by the simulator only.\n')
+        f.write("# The simulator's truth: read by the simulator only.\n")
         yaml.safe_dump(to_dict(truth), f, sort_keys=False)
     os.replace(tmp, path)
 
@@ -196,7 +208,8 @@ def _plain(obj):
         return {k: _plain(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple, np.ndarray)):
         return [_plain(v) for v in obj]
-    return float(obj) if isinstance(obj, (np.floating, float, int)) and not isinstance(obj, bool) else obj
+    return (float(obj) if isinstance(obj, (np.floating, float, int)) and not isinstance(obj, bool)
+            else obj)
 
 
 def default_path():
@@ -205,12 +218,14 @@ def default_path():
 
 
 class JointReadings:
-    """The hook between the simulated arms and the resolvers: ``(alpha, alphad) -> increments``.
+    """
+    The hook between the simulated arms and the resolvers: ``(alpha, alphad) -> increments``.
 
-    Tracks each joint's motion direction (the sign of its last speed above ``min_speed`` rad/s, for
-    backlash) and applies the truth's joint effects; without effects the increments are alpha - theta0.
-    On a reversal the reading steps by the backlash width at once (the gap is not simulated as a
-    state); 0.02 rad/s (1 cm/s at the elbow) keeps the controller's dither at rest from flipping it.
+    Tracks each joint's motion direction (the sign of its last speed above ``min_speed`` rad/s,
+    for backlash) and applies the truth's joint effects; without effects the increments are
+    alpha - theta0. On a reversal the reading steps by the backlash width at once (the gap is not
+    simulated as a state); 0.02 rad/s (1 cm/s at the elbow) keeps the controller's dither at rest
+    from flipping it.
     """
 
     def __init__(self, truth, min_speed=0.02):
@@ -220,5 +235,6 @@ class JointReadings:
     def __call__(self, alpha, dalpha):
         moving = np.abs(dalpha) > self.min_speed
         self.direction = np.where(moving, np.sign(dalpha), self.direction)
-        P = delta.forward(self.truth.geometry, alpha) if 'gravity_compliance' in self.truth.effects else None
+        P = (delta.forward(self.truth.geometry, alpha)
+             if 'gravity_compliance' in self.truth.effects else None)
         return self.truth.increments(alpha, self.direction, P)

@@ -11,8 +11,8 @@ def test_fixed_ball_stays():
 
 @pytest.mark.parametrize('max_speed', [0.5, 1.5])
 def test_chaotic_ball_keeps_its_box_and_top_speed(max_speed):
-    ball = ChaoticBall(centre=(1.2, 0.0, 0.95), half_size=(0.15, 0.3, 0.2), max_speed=max_speed, seed=3,
-                       duration=20.0)
+    ball = ChaoticBall(centre=(1.2, 0.0, 0.95), half_size=(0.15, 0.3, 0.2), max_speed=max_speed,
+                       seed=3, duration=20.0)
     t = np.arange(0.0, ball.duration, 1e-3)
     p = ball.at(t)
     assert np.all(np.abs(p - [1.2, 0.0, 0.95]) <= np.array([0.15, 0.3, 0.2]) + 1e-12)

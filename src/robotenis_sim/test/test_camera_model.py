@@ -2,10 +2,9 @@
 import cv2
 import numpy as np
 import pytest
-from scipy.stats import chi2
-
 from robotenis_sim import camera_model as cm, truth as sim_truth
 from robotenis_vision import camera, detector
+from scipy.stats import chi2
 
 R = 0.0095
 CAM = camera.default()
@@ -14,16 +13,22 @@ BLACK = cm.Background(low=0.0, high=0.0, texture=0.0)
 
 
 def opencv_outline(C, n=4000):
-    """The sphere's outline projected by OpenCV (its own plumb_bob): a polygon (n, 2), pixels."""
-    uv, _ = cv2.projectPoints(cm.tangent_circle(C, R, n).reshape(-1, 1, 3), np.zeros(3), np.zeros(3), CAM.K, CAM.D)
+    """Project the sphere's outline with OpenCV (its own plumb_bob): a polygon (n, 2), pixels."""
+    uv, _ = cv2.projectPoints(cm.tangent_circle(C, R, n).reshape(-1, 1, 3), np.zeros(3),
+                              np.zeros(3), CAM.K, CAM.D)
     return uv.reshape(-1, 2)
 
 
-@pytest.mark.parametrize('C', [[0.0, 0.0, 0.2], [0.0, 0.0, 0.6], [0.15, 0.1, 0.3], [-0.2, 0.1, 0.35], [0.02, -0.05, 0.15]])
+@pytest.mark.parametrize('C', [[0.0, 0.0, 0.2], [0.0, 0.0, 0.6], [0.15, 0.1, 0.3],
+                               [-0.2, 0.1, 0.35], [0.02, -0.05, 0.15]])
 def test_covered_area_and_centroid_match_the_projected_outline(C):
-    """Supersampled coverage: the ball's area and centroid in the image to 1/200 px of radius and
-    position (8x8 rays per pixel: 1/64 of a pixel's area per edge pixel, averaging out along the edge;
-    8-bit rounding of the coverage adds 1/510 per edge pixel at most)."""
+    """
+    Check that the covered area and centroid match the projected outline.
+
+    Supersampled coverage: the ball's area and centroid in the image to 1/200 px of radius and
+    position (8x8 rays per pixel: 1/64 of a pixel's area per edge pixel, averaging out along the
+    edge; 8-bit rounding of the coverage adds 1/510 per edge pixel at most).
+    """
     image = cm.render(CAM, C, R, np.random.default_rng(0), lighting=WHITE, background=BLACK,
                       blur_sigma=0.0, noise_sigma=0.0).astype(float) / 255
     x, y = opencv_outline(C).T
@@ -43,10 +48,11 @@ def test_sphere_outline_is_the_projected_tangent_circle():
 
 
 def test_noise_has_the_requested_variance():
-    """Flat background, no ball in view: the variance is noise^2 plus the 1/12 of 8-bit rounding."""
+    """Check a flat, ball-free background: the variance is noise^2 plus 1/12 (8-bit rounding)."""
     rng = np.random.default_rng(3)
     flat = cm.Background(low=100.0, high=100.0, texture=0.0)
-    image = cm.render(CAM, [0.0, 0.0, -1.0], R, rng, background=flat, noise_sigma=2.0).astype(float)
+    image = cm.render(CAM, [0.0, 0.0, -1.0], R, rng, background=flat,
+                      noise_sigma=2.0).astype(float)
     block = image[100:200, 100:300]
     n = block.size
     s2 = block.var(ddof=1)
@@ -63,7 +69,8 @@ def test_shading_background_and_repeatability():
     assert ball.max() - ball.min() > 100                 # shaded: a lit side and a dark side
     assert abs(int(a[20, 600]) - int(a[460, 20])) > 30   # the background has a gradient
     empty = cm.render(CAM, [0.0, 0.0, -0.2], R, np.random.default_rng(9))
-    assert np.abs(empty[225:255, 305:335].astype(int) - int(np.median(empty[225:255, 305:335]))).max() < 40
+    assert np.abs(empty[225:255, 305:335].astype(int)
+                  - int(np.median(empty[225:255, 305:335]))).max() < 40
 
 
 def test_sphere_in_optical_frame_from_the_mounting():
@@ -71,7 +78,8 @@ def test_sphere_in_optical_frame_from_the_mounting():
     P = np.array([0.01, 0.02, 0.8])
     ball = truth.sphere_position
     C = cm.sphere_in_optical(P, ball, truth.camera_rotation, truth.camera_translation)
-    np.testing.assert_allclose(truth.camera_rotation @ C + P + truth.camera_translation, ball, atol=1e-15)
+    np.testing.assert_allclose(truth.camera_rotation @ C + P + truth.camera_translation, ball,
+                               atol=1e-15)
     # the nominal mounting looks along base +x: depth is the base x distance
     assert abs(C[2] - (ball[0] - P[0] - truth.camera_translation[0])) < 1e-15
 
@@ -104,22 +112,27 @@ def test_circles_cover_their_projected_area():
     """A 40 mm disc at 200 mm, tilted: the ink covers the area of its projected rim (OpenCV)."""
     n = np.array([0.0, np.sin(0.3), -np.cos(0.3)])
     c = np.array([0.01, -0.02, 0.2])
-    image = cm.render_circles(CAM, [c], [n], [0.02], np.random.default_rng(0), plate=255.0, ink=0.0,
-                              blur_sigma=0.0, noise_sigma=0.0).astype(float)
+    image = cm.render_circles(CAM, [c], [n], [0.02], np.random.default_rng(0), plate=255.0,
+                              ink=0.0, blur_sigma=0.0, noise_sigma=0.0).astype(float)
     ink = (255.0 - image) / 255.0
     rim = cm._disc_rim(c, n, 0.02, 4000)
     uv, _ = cv2.projectPoints(rim.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), CAM.K, CAM.D)
     x, y = uv.reshape(-1, 2).T
     area = 0.5 * abs(np.dot(x, np.roll(y, 1)) - np.dot(y, np.roll(x, 1)))
-    assert abs(ink.sum() - area) / (2 * np.sqrt(np.pi * area)) < 0.005    # 1/200 px of "radius", as above
+    # 1/200 px of "radius", as above
+    assert abs(ink.sum() - area) / (2 * np.sqrt(np.pi * area)) < 0.005
     with pytest.raises(ValueError, match='must agree'):
         cm.render_circles(CAM, [c], [n, n], [0.02], np.random.default_rng(0))
 
 
 def test_frame_clock_exposes_the_first_sample_after_each_deadline():
-    """4 ms samples (stamps rounded to ns as on the wire), 120 Hz: one frame per deadline k / 120, on
-    the first sample at or after it, so 120 frames per simulated second; a clock started late (a camera
-    joining after the simulator) picks the same samples from its first deadline on."""
+    """
+    Check that the frame clock exposes the first sample after each deadline.
+
+    4 ms samples (stamps rounded to ns as on the wire), 120 Hz: one frame per deadline k / 120, on
+    the first sample at or after it, so 120 frames per simulated second; a clock started late (a
+    camera joining after the simulator) picks the same samples from its first deadline on.
+    """
     samples = np.round(np.arange(0, 2000) * 0.004 * 1e9) * 1e-9
     clock = cm.FrameClock(120.0)
     frames = np.array([t for t in samples if clock.due(t)])
@@ -134,22 +147,30 @@ def test_frame_clock_exposes_the_first_sample_after_each_deadline():
 
 
 def test_a_ball_just_past_the_border_renders():
-    """Its box is clipped to a pixel or two at the image's edge (a hand camera at the end of a session
+    """
+    Check that a ball just past the border renders.
+
+    Its box is clipped to a pixel or two at the image's edge (a hand camera at the end of a session
     looked there): every position of the ball's rim from 20 px outside (in ideal pixels: the lens
-    moves the image's edge by several) to 3 px inside renders."""
+    moves the image's edge by several) to 3 px inside renders.
+    """
     rng = np.random.default_rng(0)
     z = 0.3
     r_px = CAM.fx * R / z
-    for rim in np.arange(-20.0, 3.0, 0.25):              # u of the rim's rightmost point, and v of its lowest
+    for rim in np.arange(-20.0, 3.0, 0.25):   # u of the rim's rightmost point, and v of its lowest
         u = rim - r_px
         for C in ([(u - CAM.cx) * z / CAM.fx, 0.0, z], [0.0, (u - CAM.cy) * z / CAM.fy, z]):
             assert cm.render(CAM, C, R, rng, noise_sigma=0.0).shape == (CAM.height, CAM.width)
 
 
 def test_the_detector_measures_a_render_at_200_mm_on_axis_to_its_resolution():
-    """Shading, highlight, gradient and textured background, blur and noise: the outline is found
+    """
+    Check that the detector measures a render at 200 mm on axis to its resolution.
+
+    Shading, highlight, gradient and textured background, blur and noise: the outline is found
     to 1/50 px (robotenis_vision's test_edges), so the centre is good to that resolution over the
-    ball's apparent radius along the line of sight and over f across it, plus 3 standard errors."""
+    ball's apparent radius along the line of sight and over f across it, plus 3 standard errors.
+    """
     c, resolution = np.array([0.0, 0.0, 0.2]), 0.02
     rng = np.random.default_rng(5)
     dets = [detector.detect(cm.render(CAM, c, R, rng), CAM, R) for _ in range(10)]

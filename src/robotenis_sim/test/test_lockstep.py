@@ -56,7 +56,7 @@ def visual(clock):
                                                camera_rate=120.0, visual_delay=1 / 120.0,
                                                visual_timeout=0.05), clock)
     t = 0.0
-    for _ in range(40):                              # samples every 4 ms: frames at 0, 12, 20, 28 ms
+    for _ in range(40):         # samples every 4 ms: frames at 0, 12, 20, 28 ms
         schedule.sampled(t)
         t += 0.004
     return schedule

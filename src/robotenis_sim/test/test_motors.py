@@ -15,7 +15,7 @@ def desc():
 
 
 def free_motion(desc, mass, dt, duration):
-    """Unforced (tau = 0), undamped motion from home with arms swinging: energy at start and end."""
+    """Swing the arms from home, unforced (tau = 0) and undamped: energy at start and end."""
     model = dyn.SingleRobotDynamics(desc, mass)
     alpha, dalpha = list(desc.theta0), [1.0, -0.5, 0.2]
     E0 = dyn.energy(desc, mass, alpha, dalpha)
@@ -26,8 +26,12 @@ def free_motion(desc, mass, dt, duration):
 
 
 def test_energy_is_conserved_to_the_order_of_rk4(desc):
-    """RK4's global error is O(dt^4): the drift halves the step and shrinks ~16 times, and at the
-    simulator's 1 ms it is under 1e-6 of the kinetic energy scale (here ~1 J) over 0.3 s of fall."""
+    """
+    Check that energy is conserved to the order of RK4.
+
+    RK4's global error is O(dt^4): the drift halves the step and shrinks ~16 times, and at the
+    simulator's 1 ms it is under 1e-6 of the kinetic energy scale (here ~1 J) over 0.3 s of fall.
+    """
     mass = dyn.MassParameters()
     E0, E1 = free_motion(desc, mass, 1e-3, 0.3)
     _, E2 = free_motion(desc, mass, 0.5e-3, 0.3)
@@ -37,11 +41,13 @@ def test_energy_is_conserved_to_the_order_of_rk4(desc):
 
 
 def test_inverse_dynamics_torques_replay_the_trajectory(desc):
-    """The paper's test motion, open loop: torques of eqs. 4-5 fed to the forward simulation.
+    """
+    The paper's test motion, open loop: torques of eqs. 4-5 fed to the forward simulation.
 
     With RK4 at 1 ms the joint error stays far below one resolver count (3.8e-5 rad) and shrinks
-    with the step faster than O(dt^2): not the full O(dt^4), as the motion's fourth derivative jumps
-    where the segment ends inside a step (s = -840 / T^4 at u = 1)."""
+    with the step faster than O(dt^2): not the full O(dt^4), as the motion's fourth derivative
+    jumps where the segment ends inside a step (s = -840 / T^4 at u = 1).
+    """
     mass = dyn.MassParameters()
     seg = tr.segment([0, 0, 0.75], [-0.2, 0.2, 0.75], 0.0, 2.0, 4 * dyn.G)
     model = dyn.SingleRobotDynamics(desc, mass)
@@ -55,8 +61,8 @@ def test_inverse_dynamics_torques_replay_the_trajectory(desc):
         alpha, dalpha = list(start.alpha), list(start.dalpha)
         n = int(np.ceil(seg.T / dt))
         for k in range(n):
-            alpha, dalpha = motors.rk4_step(lambda t, a, d: model.accelerations(a, d, torque(t))[0],
-                                            k * dt, alpha, dalpha, dt)
+            alpha, dalpha = motors.rk4_step(
+                lambda t, a, d: model.accelerations(a, d, torque(t))[0], k * dt, alpha, dalpha, dt)
         return np.array(alpha) - delta.inverse(desc, seg.sample(n * dt)[0])
 
     err_1, err_2 = np.abs(replay(1e-3)).max(), np.abs(replay(0.5e-3)).max()
@@ -66,38 +72,42 @@ def test_inverse_dynamics_torques_replay_the_trajectory(desc):
 
 def test_resolver_readings_are_quantised_with_the_stated_noise(desc):
     res = motors.ResolverParameters(noise=3e-4)
-    sim = motors.SimulatedMotors(desc.copy(theta0=np.array([0.01, -0.02, 0.03])), dyn.MassParameters(),
-                                 resolver=res, rng=np.random.default_rng(0))
+    sim = motors.SimulatedMotors(desc.copy(theta0=np.array([0.01, -0.02, 0.03])),
+                                 dyn.MassParameters(), resolver=res, rng=np.random.default_rng(0))
     Theta = np.array([sim.read()[0] for _ in range(4000)])
     counts = Theta / res.resolution
     np.testing.assert_allclose(counts, np.round(counts), atol=1e-9)
-    # quantisation adds q^2/12 to the noise variance; 4000 samples: std known to ~1.1 %, allow 4 sigma
+    # quantisation adds q^2/12 to the noise variance; 4000 samples: std known to ~1.1 %, allow
+    # 4 sigma
     expected = np.sqrt(res.noise ** 2 + res.resolution ** 2 / 12)
     np.testing.assert_allclose(Theta.std(axis=0), expected, rtol=0.045)
     np.testing.assert_allclose(Theta.mean(axis=0), 0, atol=4 * expected / np.sqrt(4000))
 
 
 def test_brakes_hold_until_the_first_command(desc):
-    sim = motors.SimulatedMotors(desc, dyn.MassParameters(), resolver=motors.ResolverParameters(noise=0))
+    sim = motors.SimulatedMotors(desc, dyn.MassParameters(),
+                                 resolver=motors.ResolverParameters(noise=0))
     for _ in range(100):
         sim.step()
     np.testing.assert_array_equal(sim.read()[0], 0)
     sim.set_command([0, 0, 0])
     for _ in range(100):
         sim.step()
-    assert np.all(sim.read()[0] > 0)  # a damper alone does not hold gravity: the arms sink (theta down)
+    # a damper alone does not hold gravity: the arms sink (theta down)
+    assert np.all(sim.read()[0] > 0)
 
 
 def test_joint_effects_hook_sits_between_joint_and_reading(desc):
     offset = np.array([1e-3, 0, -2e-3])
-    sim = motors.SimulatedMotors(desc, dyn.MassParameters(), resolver=motors.ResolverParameters(noise=0),
+    sim = motors.SimulatedMotors(desc, dyn.MassParameters(),
+                                 resolver=motors.ResolverParameters(noise=0),
                                  joint_effects=lambda alpha, dalpha: alpha - desc.theta0 + offset)
     q = sim.resolver.resolution
     np.testing.assert_allclose(sim.read()[0], np.round(offset / q) * q)
 
 
 def move_to(sim, controller, goal, steps):
-    """The closed loop at 1 kHz for ``steps`` periods, with ``goal`` given after the first reading."""
+    """Run the 1 kHz closed loop for ``steps`` periods, ``goal`` given after the first reading."""
     for k in range(steps):
         Theta, dTheta = sim.read()
         ref, _ = controller.update(k * sim.dt, Theta, dTheta)
@@ -108,9 +118,13 @@ def move_to(sim, controller, goal, steps):
 
 
 def test_closed_loop_reaches_a_goal_within_the_resolver_resolution(desc):
-    """Controller and robot share geometry and masses: at rest after the move, the joint error is the
+    """
+    Check that the closed loop reaches a goal within the resolver resolution.
+
+    Controller and robot share geometry and masses: at rest after the move, the joint error is the
     static loop's: the readings' quantisation and noise (a few counts), so the effector is within
-    |J| * 4 counts of the goal (|J| < 1.2 m/rad here)."""
+    |J| * 4 counts of the goal (|J| < 1.2 m/rad here).
+    """
     mass = dyn.MassParameters()
     sim = motors.SimulatedMotors(desc, mass, rng=np.random.default_rng(7))
     c = ctl.MotionController(desc, mass, max_speed=2.0, max_acceleration=4 * dyn.G)
@@ -124,10 +138,16 @@ def test_closed_loop_reaches_a_goal_within_the_resolver_resolution(desc):
 
 
 def test_a_calibrated_models_joint_effects_bring_the_robot_to_the_goal(desc):
-    """The truth has a gear error and backlash; a controller whose description carries them reaches the
-    goal within the loop's resolution, one without them misses it by more."""
-    truth = sim_truth.with_effects(sim_truth.load(), joint_scale=[5e-3, -4e-3, 4e-3], backlash=[1e-3, 6e-4, 8e-4])
-    # the truth scales the reading, (1 + s)(motor - theta0); the model scales the angle: k = 1/(1 + s) - 1
+    """
+    Check that a calibrated model's joint effects bring the robot to the goal.
+
+    The truth has a gear error and backlash; a controller whose description carries them reaches
+    the goal within the loop's resolution, one without them misses it by more.
+    """
+    truth = sim_truth.with_effects(sim_truth.load(), joint_scale=[5e-3, -4e-3, 4e-3],
+                                   backlash=[1e-3, 6e-4, 8e-4])
+    # the truth scales the reading, (1 + s)(motor - theta0); the model scales the angle:
+    # k = 1/(1 + s) - 1
     scale = (1 / (1 + np.array([5e-3, -4e-3, 4e-3])) - 1).tolist()
     calibrated = truth.geometry.copy(effects=[{'name': 'joint_scale', 'scale': scale},
                                               {'name': 'backlash', 'width': [1e-3, 6e-4, 8e-4]}])
@@ -140,13 +160,18 @@ def test_a_calibrated_models_joint_effects_bring_the_robot_to_the_goal(desc):
         c = ctl.MotionController(model, mass, max_speed=2.0, max_acceleration=4 * dyn.G)
         move_to(sim, c, goal, 800)
         errors.append(np.linalg.norm(sim.effector()[0] - goal))
-    bound = np.linalg.norm(delta.jacobian(truth.geometry, goal), 2) * 4 * motors.ResolverParameters().resolution
+    bound = (np.linalg.norm(delta.jacobian(truth.geometry, goal), 2) * 4
+             * motors.ResolverParameters().resolution)
     assert errors[0] < bound < errors[1], (errors, bound)
 
 
 def test_batch_motors_step_as_the_scalar_motors_do(desc):
-    """BatchMotors is SimulatedMotors vectorised: the same commands give the same arms, readings
-    and effector, to rounding (the two evaluate the dynamics with different code)."""
+    """
+    Check that the batch motors step as the scalar motors do.
+
+    BatchMotors is SimulatedMotors vectorised: the same commands give the same arms, readings
+    and effector, to rounding (the two evaluate the dynamics with different code).
+    """
     truth = sim_truth.load()
     mass = motors.true_masses(truth)
     start = np.array([[0.0, 0.0, 0.0], [0.1, -0.05, 0.2], [-0.1, 0.15, 0.05]])

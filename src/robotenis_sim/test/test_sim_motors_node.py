@@ -1,21 +1,21 @@
-"""sim_motors' visual lockstep, its callbacks called directly: the simulator waits for each frame's command."""
+"""sim_motors' visual lockstep via its callbacks: the simulator waits for each frame's command."""
 import time
 
+from geometry_msgs.msg import TwistStamped
 import pytest
 import rclpy
-from geometry_msgs.msg import TwistStamped
-from sensor_msgs.msg import JointState
-
 from robotenis_ros.names import JOINTS
 from robotenis_sim.sim_motors_node import SimMotorsNode
+from sensor_msgs.msg import JointState
 
 DELAY, TIMEOUT = 1.0 / 120.0, 0.05
 
 
 @pytest.fixture
 def node():
-    rclpy.init(args=['--ros-args', '-p', 'publish_clock:=true', '-p', 'lockstep:=true', '-p', 'speed:=0.0',
-                     '-p', 'camera_rate:=120.0', '-p', f'visual_delay:={DELAY}', '-p', f'visual_timeout:={TIMEOUT}',
+    rclpy.init(args=['--ros-args', '-p', 'publish_clock:=true', '-p', 'lockstep:=true',
+                     '-p', 'speed:=0.0', '-p', 'camera_rate:=120.0',
+                     '-p', f'visual_delay:={DELAY}', '-p', f'visual_timeout:={TIMEOUT}',
                      '-p', 'seed:=1'])
     n = SimMotorsNode()
     try:
@@ -26,7 +26,7 @@ def node():
 
 
 def controller_answers(node, steps):
-    """Answer the last reading ``steps`` times (as the motion controller does); the simulated time after."""
+    """Answer the last reading ``steps`` times as the controller does; return the sim time."""
     for _ in range(steps):
         msg = JointState(name=list(JOINTS), velocity=[0.0, 0.0, 0.0])
         msg.header.stamp = node.last_stamp
@@ -43,13 +43,14 @@ def visual_answer(node, t):
 def test_the_simulator_waits_for_each_frames_command_while_the_loop_answers(node):
     # nothing has answered yet: frames go by unwaited
     assert controller_answers(node, 50) == pytest.approx(0.050)
-    visual_answer(node, node.schedule.exposures[-1])               # the loop answers its latest frame
+    visual_answer(node, node.schedule.exposures[-1])      # the loop answers its latest frame
     while not node.schedule.exposures:
         controller_answers(node, 1)
-    t_frame = node.schedule.exposures[0]                           # the next frame, not answered yet
+    t_frame = node.schedule.exposures[0]                  # the next frame, not answered yet
     t = controller_answers(node, 50)
     assert t < t_frame + DELAY <= t + node.sim.dt + 1e-9  # stopped at the step before its deadline
-    visual_answer(node, t_frame)                          # its command comes: the simulator goes on
+    # its command comes: the simulator goes on
+    visual_answer(node, t_frame)
     assert controller_answers(node, 1) > t
 
 
@@ -60,4 +61,5 @@ def test_an_unanswered_frame_is_given_up_after_the_timeout_and_then_not_waited_f
     time.sleep(1.5 * TIMEOUT)
     node.on_timer()                                       # the timer notices the timeout
     assert node.sim.t > t and not node.schedule.visual_answers
-    assert controller_answers(node, 50) == pytest.approx(t + node.sim.dt + 0.050)  # no more waiting
+    # no more waiting
+    assert controller_answers(node, 50) == pytest.approx(t + node.sim.dt + 0.050)

@@ -20,7 +20,8 @@ def test_default_truth_is_table1_without_effects(truth):
 def test_reading_round_trip_with_gear_error(truth):
     t = sim_truth.with_effects(truth, joint_scale=[1e-3, -2e-3, 0.0])
     motor = truth.geometry.theta0 + np.array([0.2, -0.1, 0.3])
-    np.testing.assert_allclose(t.reading(motor), (1 + np.array([1e-3, -2e-3, 0])) * [0.2, -0.1, 0.3])
+    np.testing.assert_allclose(t.reading(motor),
+                               (1 + np.array([1e-3, -2e-3, 0])) * [0.2, -0.1, 0.3])
     np.testing.assert_allclose(t.motor_from_reading(t.reading(motor)), motor, atol=1e-15)
 
 
@@ -52,8 +53,10 @@ def test_gravity_torque_matches_virtual_work(truth):
         return sim_truth.G * (load.arm * np.sum(geometry.a * np.sin(th)) + load.platform * P[2])
 
     eps = 1e-6
-    numeric = [(minus_potential(theta + eps * e) - minus_potential(theta - eps * e)) / (2 * eps) for e in np.eye(3)]
-    np.testing.assert_allclose(truth.gravity_torque(delta.forward(geometry, theta), theta), numeric, rtol=1e-6)
+    numeric = [(minus_potential(theta + eps * e) - minus_potential(theta - eps * e)) / (2 * eps)
+               for e in np.eye(3)]
+    np.testing.assert_allclose(truth.gravity_torque(delta.forward(geometry, theta), theta),
+                               numeric, rtol=1e-6)
 
 
 def test_hand_eye_rotation_turns_the_camera(truth):
@@ -69,12 +72,14 @@ def test_base_geometry_moves_the_motors(truth):
     np.testing.assert_allclose(t.geometry.phi - truth.geometry.phi, [0, 0.002, 0])
 
 
-@pytest.mark.parametrize('change, key', [({'geometry': None}, 'geometry: missing key'),
-                                         ({'effects': {'warp': [0, 0, 0]}}, 'effects.warp: unknown effect'),
-                                         ({'effects': {'backlash': [0, 0]}}, 'effects.backlash: expected 3'),
-                                         ({'sphere_position': 'here'}, 'sphere_position: expected 3')])
+@pytest.mark.parametrize('change, key', [
+    ({'geometry': None}, 'geometry: missing key'),
+    ({'effects': {'warp': [0, 0, 0]}}, 'effects.warp: unknown effect'),
+    ({'effects': {'backlash': [0, 0]}}, 'effects.backlash: expected 3'),
+    ({'sphere_position': 'here'}, 'sphere_position: expected 3')])
 def test_bad_truth_files_name_the_key(truth, change, key):
-    data = {'geometry': truth.geometry.to_dict(), 'camera_translation': [0.1, 0, 0], 'sphere_position': [0.8, 0, 1]}
+    data = {'geometry': truth.geometry.to_dict(), 'camera_translation': [0.1, 0, 0],
+            'sphere_position': [0.8, 0, 1]}
     data.update(change)
     data = {k: v for k, v in data.items() if v is not None}
     with pytest.raises(DescriptionError, match=key):
@@ -82,7 +87,7 @@ def test_bad_truth_files_name_the_key(truth, change, key):
 
 
 def test_increments_invert_the_joint_effects(truth):
-    """Arm angles from motor angles, then back to readings: the truth's joint effects round-trip."""
+    """Map motor to arm angles, then back to readings: the truth's joint effects round-trip."""
     t = sim_truth.with_effects(truth, joint_scale=[1e-3, -2e-3, 0.0], backlash=[2e-4, 1e-4, 3e-4],
                                gravity_compliance=[1e-4, 2e-4, 1.5e-4])
     motor = delta.inverse(truth.geometry, [0.1, -0.05, 0.9])
