@@ -1,4 +1,5 @@
-"""Benchmark: the simulator's real-time factor at 1 kHz, and the hand camera's render time.
+"""
+Benchmark: the simulator's real-time factor at 1 kHz, and the hand camera's render time.
 
 Real-time factor = simulated seconds per wall second of robotenis_sim.motors.SimulatedMotors: RK4
 at 1 ms on the Lagrangian dynamics with massive forearms, drives (eq. 10) and resolvers, holding a
@@ -9,18 +10,17 @@ Baseline, same process, same step: RK4 on the vectorised numpy forward dynamics
 import time
 
 import numpy as np
-from scipy.integrate import solve_ivp
-
 from robotenis_control import dynamics as dyn
 from robotenis_kinematics import description
 from robotenis_sim import motors
+from scipy.integrate import solve_ivp
 
 TARGET_RTF = 3.0
 SIM_SECONDS = 2.0
 
 
 def command(t):
-    """A swinging joint-speed command (rad/s): keeps the arms moving over the whole run."""
+    """Return a swinging joint-speed command, rad/s: keeps the arms moving over the whole run."""
     return 0.8 * np.sin(2 * np.pi * 1.5 * t + np.array([0.0, 2.1, 4.2]))
 
 
@@ -40,8 +40,11 @@ def numpy_rk4(desc, mass, seconds, dt=1e-3):
     start = time.perf_counter()
     for k in range(int(round(seconds / dt))):
         ref = command(k * dt)
-        f = lambda a, d: dyn.forward_dynamics(desc, mass, a, d, np.clip(drives.K_V * (ref - d), -drives.torque_limit,  # noqa: E731
-                                                                        drives.torque_limit))
+
+        def f(a, d):
+            tau = np.clip(drives.K_V * (ref - d), -drives.torque_limit, drives.torque_limit)
+            return dyn.forward_dynamics(desc, mass, a, d, tau)
+
         k1v, k1a = dalpha, f(alpha, dalpha)
         k2v = dalpha + dt / 2 * k1a
         k2a = f(alpha + dt / 2 * k1v, k2v)
@@ -70,19 +73,22 @@ def scipy_ivp(desc, mass, seconds, dt=1e-3):
 
 
 def camera_figure(frames=200, target_ms=4.0):
-    """Render time per 640x480 frame of the hand camera (robotenis_sim.camera_model.render).
+    """
+    Render time per 640x480 frame of the hand camera (robotenis_sim.camera_model.render).
 
     The ball at 150-600 mm in the default scene, one core: CPU time of this process per frame (the
     machine is shared, so wall times carry the other processes), wall median and minimum. Baseline
-    in the same process: full-frame noise and blur, the least a renderer that touches every pixel pays.
+    in the same process: full-frame noise and blur, the least a renderer that touches every pixel
+    pays.
     """
     import cv2
     from robotenis_sim import camera_model
     from robotenis_vision import camera
     cv2.setNumThreads(1)
     cam, rng = camera.default(), np.random.default_rng(1)
-    centres = [np.array([0.02 * np.sin(k), 0.015 * np.cos(k), 0.15 + 0.45 * (k % 10) / 9]) for k in range(frames)]
-    camera_model.render(cam, centres[0], 0.0095, rng)               # builds the per-camera caches
+    centres = [np.array([0.02 * np.sin(k), 0.015 * np.cos(k), 0.15 + 0.45 * (k % 10) / 9])
+               for k in range(frames)]
+    camera_model.render(cam, centres[0], 0.0095, rng)  # builds the per-camera caches
 
     def run(fn, items):
         wall, cpu = [], time.process_time()
@@ -90,7 +96,8 @@ def camera_figure(frames=200, target_ms=4.0):
             t = time.perf_counter()
             fn(item)
             wall.append(time.perf_counter() - t)
-        return (time.process_time() - cpu) / len(items) * 1e3, np.median(wall) * 1e3, np.min(wall) * 1e3
+        return ((time.process_time() - cpu) / len(items) * 1e3, np.median(wall) * 1e3,
+                np.min(wall) * 1e3)
 
     def floor(_):
         frame = np.full((cam.height, cam.width), 100.0, np.float32)
@@ -99,7 +106,8 @@ def camera_figure(frames=200, target_ms=4.0):
 
     cpu, med, low = run(lambda c: camera_model.render(cam, c, 0.0095, rng), centres)
     base = run(floor, centres[:frames // 4])[0]
-    print(f'hand camera render: {cpu:.2f} ms CPU per 640x480 frame (wall median {med:.2f}, minimum {low:.2f}; '
+    print(f'hand camera render: {cpu:.2f} ms CPU per 640x480 frame '
+          f'(wall median {med:.2f}, minimum {low:.2f}; '
           f'target < {target_ms:.0f} ms: {"met" if cpu < target_ms else "NOT met"}); '
           f'baseline full-frame noise + blur: {base:.2f} ms CPU')
 
@@ -109,11 +117,13 @@ def main():
     rtf, alpha = ours(desc, mass, SIM_SECONDS)
     rtf_np, alpha_np = numpy_rk4(desc, mass, SIM_SECONDS / 4)
     rtf_ivp, alpha_ivp = scipy_ivp(desc, mass, SIM_SECONDS / 20)
-    print(f'simulated motors, RK4 at 1 kHz, {SIM_SECONDS:.0f} s simulated (drives, resolvers, no ROS)')
+    print(f'simulated motors, RK4 at 1 kHz, {SIM_SECONDS:.0f} s simulated '
+          '(drives, resolvers, no ROS)')
     print(f'  robotenis_sim.motors (scalar model):      real-time factor {rtf:7.2f}')
     print(f'  baseline: numpy vectorised model, RK4:    real-time factor {rtf_np:7.2f}')
     print(f'  baseline: scipy solve_ivp RK45 per 1 ms:  real-time factor {rtf_ivp:7.2f}')
-    print(f'real-time factor: {rtf:.2f}  (target >= {TARGET_RTF:.0f}: {"met" if rtf >= TARGET_RTF else "NOT met"}; '
+    print(f'real-time factor: {rtf:.2f}  '
+          f'(target >= {TARGET_RTF:.0f}: {"met" if rtf >= TARGET_RTF else "NOT met"}; '
           f'{rtf / rtf_np:.1f}x the numpy baseline)')
     camera_figure()
 

@@ -14,7 +14,8 @@ def test_sphere_detection_round_trip():
     msg.frames, msg.edge_points, msg.fit_rms_px, msg.method = 500, 180, 0.05, 'conic'
     back = deserialize_message(serialize_message(msg), SphereDetection)
     assert back.position.z == 0.2 and back.frames == 500 and back.method == 'conic'
-    np.testing.assert_array_equal(np.reshape(back.covariance, (3, 3)), np.diag([1e-10, 2e-10, 3e-9]))
+    np.testing.assert_array_equal(np.reshape(back.covariance, (3, 3)),
+                                  np.diag([1e-10, 2e-10, 3e-9]))
 
 
 def test_calibrate_service_fields():
@@ -23,10 +24,13 @@ def test_calibrate_service_fields():
     back = deserialize_message(serialize_message(request), Calibrate.Request)
     assert (back.num_poses, back.settle_time, back.pose_selection) == (300, 4.0, 'boundary')
     response = Calibrate.Response(success=False, message='busy', effects=['backlash'])
-    assert deserialize_message(serialize_message(response), Calibrate.Response).effects == ['backlash']
+    response_back = deserialize_message(serialize_message(response), Calibrate.Response)
+    assert response_back.effects == ['backlash']
 
 
 def test_progress_and_rest_markers():
     progress = CalibrationProgress(stage='measuring', pose_index=3, pose_count=300, fraction=0.01)
-    assert deserialize_message(serialize_message(progress), CalibrationProgress).stage == 'measuring'
-    assert deserialize_message(serialize_message(RestMarker(pose_index=4, start=True)), RestMarker).start
+    assert deserialize_message(serialize_message(progress),
+                               CalibrationProgress).stage == 'measuring'
+    marker = RestMarker(pose_index=4, start=True)
+    assert deserialize_message(serialize_message(marker), RestMarker).start

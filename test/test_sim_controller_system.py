@@ -1,4 +1,5 @@
-"""System test: sim_motors and motion_controller as separate processes move the robot to three goals.
+"""
+System test: sim_motors and motion_controller as separate processes move the robot to three goals.
 
 Mode: simulated time in lockstep (the simulator owns /clock, waits for the command answering each
 reading; the controller ticks on every reading), so the result does not depend on how loaded the
@@ -15,14 +16,13 @@ import signal
 import subprocess
 import time
 
+from builtin_interfaces.msg import Time as TimeMsg
+from geometry_msgs.msg import PointStamped
 import numpy as np
 import pytest
 import rclpy
-from geometry_msgs.msg import PointStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-
-from builtin_interfaces.msg import Time as TimeMsg
 from robotenis_kinematics import delta, description
 from robotenis_ros.convert import point_stamped
 from robotenis_ros.names import BASE_FRAME
@@ -57,7 +57,8 @@ def stop(procs, timeout=10.0):
 
 @pytest.fixture(params=['', 'robot1'])
 def system(tmp_path, request):
-    env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(1, 200)), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(1, 200)),
+               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')})
     nominal = description.config_path('nominal.yaml')
     ns = ['-r', f'__ns:=/{request.param}'] if request.param else []
@@ -70,7 +71,8 @@ def system(tmp_path, request):
          '-p', 'tick_on_joint_states:=true'],
     ]
     logs = [open(tmp_path / f'node{k}.log', 'w') for k in range(2)]
-    procs = [subprocess.Popen(c, env=env, stdout=log, stderr=subprocess.STDOUT) for c, log in zip(commands, logs)]
+    procs = [subprocess.Popen(c, env=env, stdout=log, stderr=subprocess.STDOUT)
+             for c, log in zip(commands, logs)]
     rclpy.init()
     node = Node('system_test_probe')
     executor = SingleThreadedExecutor()
@@ -84,15 +86,17 @@ def system(tmp_path, request):
         rclpy.try_shutdown()
         for log in logs:
             log.close()
-        assert codes == [0, 0], f'nodes did not stop cleanly: exit codes {codes}; logs in {tmp_path}'
+        assert codes == [0, 0], \
+            f'nodes did not stop cleanly: exit codes {codes}; logs in {tmp_path}'
 
 
 def test_three_goals_reached_within_the_loop_resolution(system):
     node, executor, procs, ns = system
     truth = []
-    node.create_subscription(PointStamped, f'{ns}/sim/effector_position',
-                             lambda m: truth.append((m.header.stamp.sec + m.header.stamp.nanosec * 1e-9,
-                                                     m.point.x, m.point.y, m.point.z)), 10)
+    node.create_subscription(
+        PointStamped, f'{ns}/sim/effector_position',
+        lambda m: truth.append((m.header.stamp.sec + m.header.stamp.nanosec * 1e-9,
+                                m.point.x, m.point.y, m.point.z)), 10)
     goal_pub = node.create_publisher(PointStamped, f'{ns}/goal', 10)
 
     def spin_until(predicate, wall_timeout):
@@ -102,14 +106,15 @@ def test_three_goals_reached_within_the_loop_resolution(system):
             assert all(p.poll() is None for p in procs), 'a node died'
         return predicate()
 
-    assert spin_until(lambda: len(truth) > 10 and node.count_subscribers(f'{ns}/goal') > 0, 20.0), \
-        'no simulator output'
+    assert spin_until(lambda: len(truth) > 10 and node.count_subscribers(f'{ns}/goal') > 0,
+                      20.0), 'no simulator output'
     desc = description.nominal()
     q = motors.ResolverParameters().resolution
     for goal in GOALS:
         goal_pub.publish(point_stamped(goal, TimeMsg(), BASE_FRAME))
         start = truth[-1][0]
-        assert spin_until(lambda: truth[-1][0] > start + SIM_SECONDS_PER_GOAL, 15.0), 'simulated time stalled'
+        assert spin_until(lambda: truth[-1][0] > start + SIM_SECONDS_PER_GOAL, 15.0), \
+            'simulated time stalled'
         P = np.array(truth[-1][1:])
         bound = np.linalg.norm(delta.jacobian(desc, goal), 2) * 4 * q
         assert np.linalg.norm(P - goal) < bound, (goal, P, np.linalg.norm(P - goal), bound)

@@ -1,4 +1,5 @@
-"""Run every package's tests with colcon, then the cross-package tests in test/, and summarise.
+"""
+Run every package's tests with colcon, then the cross-package tests in test/, and summarise.
 
 Fails when anything fails, and also when a package ran no test at all: a green run that tested
 nothing is a failure here (an ament_python package without pytest declared runs 0 tests).
@@ -22,13 +23,21 @@ def junit_counts(path):
 
 
 def packages():
-    """Packages with code of their own; interface-only packages are tested in test/test_interfaces.py."""
+    """
+    List the packages with code of their own.
+
+    Interface-only packages are tested in test/test_interfaces.py.
+    """
     return sorted(p.parent.name for p in (TOP / 'src').glob('*/package.xml')
                   if not (p.parent / 'msg').is_dir())
 
 
 def has_code(pkg):
-    """True when the package has a Python module beyond its __init__.py: then it must have tests."""
+    """
+    Return True when the package has a Python module beyond its __init__.py.
+
+    Then it must have tests.
+    """
     return any(f.name != '__init__.py' for f in (TOP / 'src' / pkg / pkg).glob('*.py'))
 
 
@@ -44,19 +53,21 @@ def main():
             continue
         xml = TOP / 'build' / pkg / 'pytest.xml'
         if not xml.exists():
-            xml = next(iter((TOP / 'build' / pkg / 'test_results').rglob('*.xml')), None) \
-                if (TOP / 'build' / pkg / 'test_results').exists() else None
+            xml = (next(iter((TOP / 'build' / pkg / 'test_results').rglob('*.xml')), None)
+                   if (TOP / 'build' / pkg / 'test_results').exists() else None)
         rows.append((pkg, *(junit_counts(xml) if xml else (0, 0, 0))))
     results.mkdir(parents=True, exist_ok=True)
     system_xml = results / 'system.xml'
     system = subprocess.run(
         [sys.executable, '-m', 'pytest', '-p', 'no:cacheprovider', '-q', str(TOP / 'test'),
          f'--junitxml={system_xml}'], cwd=TOP)
-    rows.append(('test/ (system)', *(junit_counts(system_xml) if system_xml.exists() else (0, 0, 0))))
+    rows.append(('test/ (system)',
+                 *(junit_counts(system_xml) if system_xml.exists() else (0, 0, 0))))
 
     print('\n%-26s %6s %6s %6s' % ('suite', 'tests', 'failed', 'skipped'))
     for name, tests, failed, skipped in rows:
-        print('%-26s %6d %6d %6d%s' % (name, tests, failed, skipped, '   <- ran no test' if tests == 0 else ''))
+        print('%-26s %6d %6d %6d%s' % (name, tests, failed, skipped,
+                                       '   <- ran no test' if tests == 0 else ''))
     total = sum(r[1] for r in rows)
     failed = sum(r[2] for r in rows)
     skipped = sum(r[3] for r in rows)

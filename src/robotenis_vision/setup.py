@@ -17,7 +17,8 @@ setup(
     zip_safe=True,
     maintainer='RoboTenis maintainers',
     maintainer_email='maintainers@robotenis.org',
-    description="""Measuring the calibration sphere from hand-camera images (paper section 5) and the sphere_detector node.""",
+    description='Measuring the calibration sphere from hand-camera images (paper section 5) '
+                'and the sphere_detector node.',
     license='Apache-2.0',
     # Declaring pytest makes colcon test run pytest; without it unittest runs and finds 0 tests.
     extras_require={'test': ['pytest']},

@@ -29,6 +29,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 GAIN_PARAMETERS = ('kp', 'kd', 'kv')
+AT_START_ONLY = ('rate', 'state_decimation', 'tick_on_joint_states')   # they shape the node itself
 STALE_READING_S = 0.05   # no joint reading for this long: command zero speed (the drives brake)
 PARAMETERS = {
     'description_path': (description.config_path('nominal.yaml'), 'the robot description YAML'),
@@ -76,13 +77,17 @@ class MotionControllerNode(Node):
         return ctl.Gains(**{k: float(v) for k, v in values.items()})
 
     def on_parameters(self, params):
-        """Apply description_path, gains and limits at run time; refuse values that do not work."""
+        """Apply description_path, gains, limits and timeout while running; refuse the others."""
         changes = {q.name: q.value for q in params}
+        fixed = sorted(set(changes) & set(AT_START_ONLY))
+        if fixed:
+            return SetParametersResult(successful=False,
+                                       reason=f'{", ".join(fixed)}: set at start only')
         try:
             if 'description_path' in changes:
                 desc = description.load(changes['description_path'])
             gains = self.read_gains(changes)
-            for key in ('max_speed', 'max_acceleration'):
+            for key in ('max_speed', 'max_acceleration', 'velocity_timeout'):
                 if key in changes and not float(changes[key]) > 0:
                     raise ValueError(f'{key} must be positive')
         except (DescriptionError, ValueError, TypeError) as e:
@@ -94,6 +99,8 @@ class MotionControllerNode(Node):
         self.controller.max_speed = float(changes.get('max_speed', self.controller.max_speed))
         self.controller.max_acceleration = float(changes.get('max_acceleration',
                                                              self.controller.max_acceleration))
+        self.controller.velocity_timeout = float(changes.get('velocity_timeout',
+                                                             self.controller.velocity_timeout))
         return SetParametersResult(successful=True)
 
     def on_reload(self, request, response):
@@ -151,7 +158,8 @@ class MotionControllerNode(Node):
         Theta, dTheta, received = self.reading
         t = received if self.tick_on_joint_states else self.now()
         if t - received > STALE_READING_S:
-            self.get_logger().warn('no joint reading for 50 ms: commanding zero speed',
+            self.get_logger().warn(f'no joint reading for {STALE_READING_S * 1e3:.0f} ms: '
+                                   'commanding zero speed',
                                    throttle_duration_sec=1.0)
             self.cmd_pub.publish(joint_state(stamp, velocity=[0.0, 0.0, 0.0]))
             return

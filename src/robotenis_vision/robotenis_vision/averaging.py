@@ -1,4 +1,5 @@
-"""Averaging N detections of one pose (the paper used 500 frames), with outlier rejection.
+"""
+Averaging N detections of one pose (the paper used 500 frames), with outlier rejection.
 
 Frames are rejected by their Mahalanobis distance to the robust centre under the robust scatter of
 the frames themselves: d^2 > chi^2_3(0.999) = 16.27 (a frame with a glint on the outline, a
@@ -25,7 +26,7 @@ class Averaged:
 
 
 def _robust_scatter(P, centre):
-    """Per-axis MAD scale with the correlation of the frames: a covariance that outliers do not inflate."""
+    """Per-axis MAD scale with the frames' correlation: a covariance outliers do not inflate."""
     mad = 1.4826 * np.median(np.abs(P - centre), axis=0)
     corr = np.corrcoef(P.T) if len(P) > 3 else np.eye(3)
     corr = np.nan_to_num(corr, nan=0.0) + 1e-9 * np.eye(3)
@@ -33,7 +34,11 @@ def _robust_scatter(P, centre):
 
 
 def average(positions, covariances=None, gate=GATE):
-    """Average positions (N, 3); covariances (N, 3, 3) are each frame's predicted covariance (optional)."""
+    """
+    Average positions (N, 3).
+
+    ``covariances`` (N, 3, 3) are each frame's predicted covariance (optional).
+    """
     P = np.asarray(positions, dtype=float)
     if P.ndim != 2 or P.shape[1] != 3 or len(P) == 0:
         raise ValueError(f'positions: expected an (N, 3) array with N >= 1, got shape {P.shape}')

@@ -1,12 +1,14 @@
-"""The plain baseline: threshold, OpenCV's fitEllipse, back-project the centre, depth from the size.
+"""
+The plain baseline: threshold, OpenCV's fitEllipse, back-project the centre, depth from the size.
 
 Near the ball (the same rough circle the other methods start from), pixels farther from the local
-background level (the median of the region's border) than a threshold (3 robust sigma of the border,
-at least 15 grey levels) are the ball, bright side and dark side alike (a plain Otsu threshold splits
-the dark side from everything else); the outer contour of the blob at the ball's place is fitted with
-cv2.fitEllipse; the ellipse centre is undistorted and back-projected; the distance along that ray
-follows from the mean semi-axis r (px) as Z = f R / r. It ignores the shading (a darker side is
-cut off), the ellipse's offset from the projected centre and the blur: what the other methods fix.
+background level (the median of the region's border) than a threshold (3 robust sigma of the
+border, at least 15 grey levels) are the ball, bright side and dark side alike (a plain Otsu
+threshold splits the dark side from everything else); the outer contour of the blob at the ball's
+place is fitted with cv2.fitEllipse; the ellipse centre is undistorted and back-projected; the
+distance along that ray follows from the mean semi-axis r (px) as Z = f R / r. It ignores the
+shading (a darker side is cut off), the ellipse's offset from the projected centre and the blur:
+what the other methods fix.
 """
 import cv2
 import numpy as np
@@ -16,7 +18,7 @@ from robotenis_vision.detection import Detection, DetectionError, RANGE
 
 
 def detect(img_f32, camera, R):
-    """A detector.Detection by the baseline; DetectionError if no blob is found."""
+    """Measure a detector.Detection by the baseline; DetectionError if no blob is found."""
     try:
         centre, r = edges.rough_circle(img_f32, camera.fx * R / RANGE[1], camera.fx * R / RANGE[0])
     except edges.EdgeError as e:
@@ -33,12 +35,17 @@ def detect(img_f32, camera, R):
     # Quantisation of a pixel contour: about 0.3 px per point, averaged over the contour.
     s = 0.3 / np.sqrt(len(contour))
     cov = np.diag([(Z / camera.fx * s) ** 2, (Z / camera.fy * s) ** 2, (Z / r_px * s) ** 2])
-    edge = camera.undistort_pixels(contour[:, 0, :].astype(float) + offset)      # ideal pixels, as the others
+    # ideal pixels, as the others
+    edge = camera.undistort_pixels(contour[:, 0, :].astype(float) + offset)
     return Detection(position, cov, edge, float('nan'), 'baseline')
 
 
 def _blob(img_f32, centre, r):
-    """Outer contour (in ROI coordinates) of the thresholded blob under the rough centre, and the ROI offset."""
+    """
+    Outer contour (in ROI coordinates) of the thresholded blob under the rough centre.
+
+    Returned with the ROI offset.
+    """
     h, w = img_f32.shape
     half = int(np.ceil(1.6 * r)) + 4
     u0, v0 = max(int(centre[0]) - half, 0), max(int(centre[1]) - half, 0)

@@ -1,4 +1,5 @@
-"""The hand camera: pinhole with the plumb_bob distortion model (ROS camera_info conventions).
+"""
+The hand camera: pinhole with the plumb_bob distortion model (ROS camera_info conventions).
 
 A point X = (X, Y, Z) in the optical frame (x right, y down, z forward, m) projects to
 
@@ -8,16 +9,17 @@ A point X = (X, Y, Z) in the optical frame (x right, y down, z forward, m) proje
     y_d = y L + p1 (r^2 + 2 y^2) + 2 p2 x y              (plumb_bob, D = [k1, k2, p1, p2, k3])
     [u, v, 1]^T = K [x_d, y_d, 1]^T                       (pixels; pixel centres at integers)
 
-Undistortion inverts the distortion by Newton's method (quadratic convergence; 1e-14 in a few steps).
+Undistortion inverts the distortion by Newton's method (quadratic convergence; 1e-14 in a few
+steps).
 
 Calibration files are the ROS camera_info YAML that camera_calibration_parsers reads and writes.
 The default camera (``default()``, ``config/hand_camera.yaml``) resembles the paper's: 640x480 and
 f = 500 px, i.e. the paper's "0.4 mm per pixel" at 200 mm (section 6.1). The 19 mm ball then spans
 63 px at 150 mm and 16 px at 600 mm, the range the detector is specified for.
 """
+from dataclasses import dataclass, field
 import os
 import tempfile
-from dataclasses import dataclass, field
 
 import numpy as np
 import yaml
@@ -44,14 +46,16 @@ class Camera:
 
     def __post_init__(self):
         K = _matrix(self.K, (3, 3), 'camera_matrix')
-        if not (K[0, 0] > 0 and K[1, 1] > 0 and K[2, 2] == 1 and K[1, 0] == K[2, 0] == K[2, 1] == 0):
-            raise CameraError('camera_matrix: expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, '
-                              f'got {K.tolist()}')
+        if not (K[0, 0] > 0 and K[1, 1] > 0 and K[2, 2] == 1
+                and K[1, 0] == K[2, 0] == K[2, 1] == 0):
+            raise CameraError('camera_matrix: expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]] '
+                              f'with fx, fy > 0, got {K.tolist()}')
         D = np.asarray(self.D, dtype=float).ravel()
         if D.shape == (4,):
             D = np.append(D, 0.0)
         if D.shape != (5,) or not np.all(np.isfinite(D)):
-            raise CameraError(f'distortion_coefficients: expected 5 finite numbers [k1, k2, p1, p2, k3], got {self.D!r}')
+            raise CameraError('distortion_coefficients: expected 5 finite numbers '
+                              f'[k1, k2, p1, p2, k3], got {self.D!r}')
         for key in ('width', 'height'):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value <= 0:
@@ -69,12 +73,12 @@ class Camera:
 
     @property
     def P(self):
-        """The 3x4 projection matrix of camera_info for a monocular, unrectified camera: [K | 0]."""
+        """Return camera_info's 3x4 projection matrix [K | 0] (monocular, unrectified camera)."""
         return np.hstack([self.K, np.zeros((3, 1))])
 
     # --- normalized <-> pixel -------------------------------------------------------------
     def to_pixels(self, xy):
-        """Normalized image coordinates (..., 2) to pixels (..., 2) through K (no distortion)."""
+        """Map normalized coordinates (..., 2) to pixels (..., 2) through K (no distortion)."""
         xy = np.asarray(xy, dtype=float)
         K = self.K
         out = np.empty(xy.shape)
@@ -83,7 +87,7 @@ class Camera:
         return out
 
     def to_normalized(self, uv):
-        """Pixels (..., 2) to normalized image coordinates (..., 2) through K^-1 (no distortion)."""
+        """Pixels (..., 2) to normalized coordinates (..., 2) through K^-1 (no distortion)."""
         uv = np.asarray(uv, dtype=float)
         K = self.K
         out = np.empty(uv.shape)
@@ -98,7 +102,7 @@ class Camera:
         return distort(xy, self.D)
 
     def undistort(self, xy_d):
-        """Distorted normalized points (..., 2) to undistorted ones (Newton; NaN where it fails)."""
+        """Distorted normalized points (..., 2) to undistorted ones (Newton; NaN if it fails)."""
         return undistort(np.asarray(xy_d, dtype=float), self.D)
 
     def distort_pixels(self, uv):
@@ -131,17 +135,21 @@ class Camera:
 
     # --- camera_info --------------------------------------------------------------------------
     def to_yaml_dict(self):
-        """The camera_calibration_parsers YAML layout as plain Python types."""
+        """Return the camera_calibration_parsers YAML layout as plain Python types."""
         def block(a):
             a = np.atleast_2d(a)
             return {'rows': a.shape[0], 'cols': a.shape[1], 'data': [float(v) for v in a.ravel()]}
         return {'image_width': self.width, 'image_height': self.height, 'camera_name': self.name,
                 'camera_matrix': block(self.K), 'distortion_model': 'plumb_bob',
-                'distortion_coefficients': block(self.D[None, :]), 'rectification_matrix': block(self.R),
-                'projection_matrix': block(self.P)}
+                'distortion_coefficients': block(self.D[None, :]),
+                'rectification_matrix': block(self.R), 'projection_matrix': block(self.P)}
 
     def camera_info_fields(self):
-        """sensor_msgs/CameraInfo field values (height, width, distortion_model, d, k, r, p) as plain types."""
+        """
+        Return the sensor_msgs/CameraInfo field values as plain types.
+
+        The fields: height, width, distortion_model, d, k, r, p.
+        """
         return {'height': self.height, 'width': self.width, 'distortion_model': 'plumb_bob',
                 'd': [float(v) for v in self.D], 'k': [float(v) for v in self.K.ravel()],
                 'r': [float(v) for v in self.R.ravel()], 'p': [float(v) for v in self.P.ravel()]}
@@ -197,28 +205,31 @@ def _matrix(value, shape, key):
     try:
         a = np.asarray(value, dtype=float).reshape(shape)
     except (TypeError, ValueError):
-        raise CameraError(f'{key}: expected {shape[0]}x{shape[1]} numbers, got {value!r:.80}') from None
+        raise CameraError(f'{key}: expected {shape[0]}x{shape[1]} numbers, '
+                          f'got {value!r:.80}') from None
     if not np.all(np.isfinite(a)):
         raise CameraError(f'{key}: must be finite')
     return a
 
 
 def _block(data, key, shape):
-    """A {rows, cols, data} block of the YAML file, checked against the expected shape."""
+    """Read a {rows, cols, data} block of the YAML file, checked against the expected shape."""
     if not isinstance(data, dict) or 'data' not in data:
         raise CameraError(f'{key}: expected a map with rows, cols and data')
     rows, cols = data.get('rows', shape[0]), data.get('cols', shape[1])
     values = data['data']
     if not isinstance(values, list) or len(values) != rows * cols or (rows, cols) != shape:
-        raise CameraError(f'{key}: expected {shape[0]}x{shape[1]} values, got rows={rows} cols={cols} '
-                          f'and {len(values) if isinstance(values, list) else values!r} values')
+        raise CameraError(f'{key}: expected {shape[0]}x{shape[1]} values, '
+                          f'got rows={rows} cols={cols} and '
+                          f'{len(values) if isinstance(values, list) else values!r} values')
     return _matrix(values, shape, key)
 
 
 def from_yaml_dict(data):
     """Camera from the camera_calibration_parsers YAML layout; errors name the key."""
     if not isinstance(data, dict):
-        raise CameraError(f'camera_info: expected a map at the top level, got {type(data).__name__}')
+        raise CameraError('camera_info: expected a map at the top level, '
+                          f'got {type(data).__name__}')
     for key in ('image_width', 'image_height', 'camera_matrix', 'distortion_coefficients'):
         if key not in data:
             raise CameraError(f'{key}: missing key')
@@ -226,16 +237,18 @@ def from_yaml_dict(data):
     if model != 'plumb_bob':
         raise CameraError(f"distortion_model: only 'plumb_bob' is supported, got {model!r}")
     dist = data['distortion_coefficients']
-    n = len(dist.get('data', [])) if isinstance(dist, dict) and isinstance(dist.get('data'), list) else 5
+    n = (len(dist.get('data', []))
+         if isinstance(dist, dict) and isinstance(dist.get('data'), list) else 5)
     D = _block(dist, 'distortion_coefficients', (1, n if n in (4, 5) else 5))
     R = _block(data['rectification_matrix'], 'rectification_matrix', (3, 3)) \
         if 'rectification_matrix' in data else np.eye(3)
-    return Camera(_block(data['camera_matrix'], 'camera_matrix', (3, 3)), D.ravel(), data['image_width'],
-                  data['image_height'], str(data.get('camera_name', 'camera')), R)
+    return Camera(_block(data['camera_matrix'], 'camera_matrix', (3, 3)), D.ravel(),
+                  data['image_width'], data['image_height'],
+                  str(data.get('camera_name', 'camera')), R)
 
 
 def from_camera_info(msg):
-    """Camera from a sensor_msgs/CameraInfo message, or a dict with its field names (k, d, width...)."""
+    """Camera from a sensor_msgs/CameraInfo message, or a dict of its fields (k, d, width...)."""
     get = (lambda k: msg[k]) if isinstance(msg, dict) else (lambda k: getattr(msg, k))
     model = get('distortion_model') or 'plumb_bob'
     if model != 'plumb_bob':
@@ -287,7 +300,7 @@ def save(camera, path):
 
 
 def default():
-    """The default hand camera (see the module docstring)."""
+    """Return the default hand camera (see the module docstring)."""
     return Camera(np.array(DEFAULT_K), np.array(DEFAULT_D), 640, 480, 'hand_camera')
 
 
@@ -297,7 +310,8 @@ def default_path():
     candidates = [os.path.join(here, '..', 'config', 'hand_camera.yaml')]
     try:
         from ament_index_python.packages import get_package_share_directory
-        candidates.append(os.path.join(get_package_share_directory('robotenis_vision'), 'config', 'hand_camera.yaml'))
+        share = get_package_share_directory('robotenis_vision')
+        candidates.append(os.path.join(share, 'config', 'hand_camera.yaml'))
     except Exception:  # not built or ament_index not importable: the source tree is enough
         pass
     for path in candidates:

@@ -1,12 +1,15 @@
-"""A dark circle of known diameter on a bright plate facing the camera: the ISO 9283 control element of
-the calibration paper's section 6.1, measured in the optical frame.
+"""
+A dark circle of known diameter on a bright plate, measured in the optical frame.
 
-A disc parallel to the image plane images as a circle whose centre is the image of the disc's centre
-(no perspective shift). Both come from the disc's ink coverage, which blur and noise do not bias:
-with the plate level p (median of a ring around the blob) and the ink level k (median inside it), each
-pixel's coverage is w = (p - I) / (p - k) clipped to [0, 1]; the area is sum w (pixels), the centre
-the w-weighted centroid. Depth z = f D / d with d = 2 sqrt(area / pi); the centre is undistorted with
-the plumb_bob model and back-projected at that depth.
+The plate faces the camera: the circle is the ISO 9283 control element of the calibration paper's
+section 6.1.
+
+A disc parallel to the image plane images as a circle whose centre is the image of the disc's
+centre (no perspective shift). Both come from the disc's ink coverage, which blur and noise do not
+bias: with the plate level p (median of a ring around the blob) and the ink level k (median inside
+it), each pixel's coverage is w = (p - I) / (p - k) clipped to [0, 1]; the area is sum w (pixels),
+the centre the w-weighted centroid. Depth z = f D / d with d = 2 sqrt(area / pi); the centre is
+undistorted with the plumb_bob model and back-projected at that depth.
 """
 import cv2
 import numpy as np
@@ -19,7 +22,7 @@ class CircleError(ValueError):
 
 
 def _blobs(image):
-    """Connected dark regions of ``image`` as (label image, stats, centroids) of OpenCV."""
+    """Find the connected dark regions of ``image``: (label image, stats, centroids) of OpenCV."""
     low, high = np.percentile(image, (1, 90))
     if high - low < 20:
         raise CircleError(f'no contrast in the image (levels {low:.0f}-{high:.0f})')
@@ -45,7 +48,8 @@ def _central_blob(stats, centroids, shape, principal_point):
 
 
 def measure_circle(image, camera, diameter, pad=4):
-    """Centre (3,) of a dark circle of ``diameter`` (m) in the optical frame (m), from a mono8 image.
+    """
+    Centre (3,) of a dark circle of ``diameter`` (m) in the optical frame (m), from a mono8 image.
 
     The circle is the whole dark blob nearest the principal point; CircleError when there is none.
     """

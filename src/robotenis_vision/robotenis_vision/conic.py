@@ -1,17 +1,20 @@
-"""The exact method: the sphere's outline is a conic, and the centre follows from it in closed form.
+"""
+The exact method: the sphere's outline is a conic, and the centre follows from it in closed form.
 
-(Equations C1, C2 are this module's: the paper works with tangent lines, robotenis_vision.paper_method.)
+(Equations C1, C2 are this module's: the paper works with tangent lines,
+robotenis_vision.paper_method.)
 
 Rays from the optical centre that touch a sphere of radius R centred at c form a cone. A ray
 p = (x, y, 1) (undistorted normalized image point) lies on it when
 
-    (p^T c)^2 - (c^T c - R^2) p^T p = 0,   i.e.   p^T Q p = 0,   Q = c c^T - (c^T c - R^2) I.   (C1)
+    (p^T c)^2 - (c^T c - R^2) p^T p = 0,   i.e.   p^T Q p = 0,   Q = c c^T - (c^T c - R^2) I.  (C1)
 
 Q has the eigenvalue R^2 with eigenvector c / |c| and the double eigenvalue -(|c|^2 - R^2), so a
 fitted conic lambda Q gives the centre without iteration (``sphere_from_conic``):
 
-    |c|^2 = R^2 (1 - mu / lambda_1),   c = |c| e_1   (lambda_1, e_1 the single eigenpair, mu the mean
-                                                     of the two others; the sign makes c_z > 0).   (C2)
+    |c|^2 = R^2 (1 - mu / lambda_1),   c = |c| e_1                                             (C2)
+
+(lambda_1, e_1 the single eigenpair, mu the mean of the two others; the sign makes c_z > 0).
 
 The conic is fitted to the undistorted edge points with Taubin's method (``taubin``), whose bias is
 far below that of a plain algebraic fit, and the centre is then refined by Gauss-Newton on the
@@ -36,7 +39,8 @@ def _design(x, y):
 
 
 def taubin(xy, weights=None):
-    """Conic matrix (3x3, symmetric, unit Frobenius norm) through points xy (n, 2), Taubin's fit.
+    """
+    Conic matrix (3x3, symmetric, unit Frobenius norm) through points xy (n, 2), Taubin's fit.
 
     Minimises sum w (xi^T theta)^2 / sum w |grad xi^T theta|^2 with the constant term eliminated by
     centring (Taubin 1991). The points are first shifted to their mean and scaled to unit RMS
@@ -84,16 +88,17 @@ def taubin(xy, weights=None):
 
 
 def sphere_conic(c, R):
-    """The cone (C1) of a sphere of radius R at c: Q = c c^T - (c^T c - R^2) I."""
+    """Return the cone (C1) of a sphere of radius R at c: Q = c c^T - (c^T c - R^2) I."""
     c = np.asarray(c, dtype=float)
     return np.outer(c, c) - (c @ c - R * R) * np.eye(3)
 
 
 def sphere_from_conic(Q, R):
-    """Centre c (3,) of the sphere of radius R whose outline is the conic Q (C2).
+    """
+    Centre c (3,) of the sphere of radius R whose outline is the conic Q (C2).
 
-    Q may carry any scale and sign. Raises ConicError when Q is not a sphere's outline (it must have
-    one eigenvalue of one sign and two of the other).
+    Q may carry any scale and sign. Raises ConicError when Q is not a sphere's outline (it must
+    have one eigenvalue of one sign and two of the other).
     """
     Q = np.asarray(Q, dtype=float)
     Q = 0.5 * (Q + Q.T)
@@ -113,7 +118,8 @@ def sphere_from_conic(Q, R):
 
 
 def sampson(xy, c, R):
-    """Signed Sampson distances (n,) of normalized points xy to the outline of the sphere (c, R).
+    """
+    Signed Sampson distances (n,) of normalized points xy to the outline of the sphere (c, R).
 
     Normalized units (multiply by the focal length for pixels); positive outside the outline.
     Several spheres at once: c (k, 3) gives (k, n).
@@ -139,8 +145,10 @@ class SphereFit:
 
 
 def refine_sphere(xy, c0, R, f, weights=None, iterations=2, reject=4.0):
-    """Gauss-Newton on c minimising sum w (f * Sampson distance)^2; outliers beyond ``reject`` sigma dropped.
+    """
+    Refine c by Gauss-Newton, minimising sum w (f * Sampson distance)^2.
 
+    Outliers beyond ``reject`` sigma are dropped.
     xy: undistorted normalized points (n, 2); f: focal length (px) to express distances in pixels;
     weights: relative weights (inverse variances up to a common factor). The covariance is
     s^2 (J^T W J)^-1 with s^2 the weighted residual variance (n - 3 degrees of freedom).
@@ -174,7 +182,8 @@ def refine_sphere(xy, c0, R, f, weights=None, iterations=2, reject=4.0):
 
 
 def correlation_inflation(residuals, lags=4):
-    """Variance factor for residuals that are correlated along the outline (points in outline order).
+    """
+    Variance factor for residuals correlated along the outline (points in outline order).
 
     Neighbouring outline points see overlapping pixels and the same background texture, so their
     errors are not independent; with lag-k autocorrelations rho_k of the residual sequence the
@@ -186,7 +195,8 @@ def correlation_inflation(residuals, lags=4):
     var = r @ r
     if len(r) < 4 * lags or var <= 0:
         return 1.0
-    rho = np.array([(r[:-k] @ r[k:] + r[-k:] @ r[:k]) / var for k in range(1, lags + 1)])   # circular
+    # circular autocorrelations: the sequence wraps around the closed outline
+    rho = np.array([(r[:-k] @ r[k:] + r[-k:] @ r[:k]) / var for k in range(1, lags + 1)])
     return float(1 + 2 * np.sum(np.maximum(rho, 0) * (1 - np.arange(1, lags + 1) / len(r))))
 
 
@@ -196,10 +206,11 @@ def _robust_scale(r, w):
 
 
 def _residual_and_jacobian(P, p2, c, R, f):
-    """f * Sampson distance (n,) and its derivative in c (n, 3), analytically.
+    """
+    Compute f * Sampson distance (n,) and its derivative in c (n, 3), analytically.
 
-    P (n, 3): the rays p = (x, y, 1); p2 = |p|^2. With F = (p.c)^2 - k |p|^2 (k = c.c - R^2) and its
-    image gradient g = 2 (p.c) c_xy - 2 k p_xy, the distance is r = -F / |g|, and
+    P (n, 3): the rays p = (x, y, 1); p2 = |p|^2. With F = (p.c)^2 - k |p|^2 (k = c.c - R^2) and
+    its image gradient g = 2 (p.c) c_xy - 2 k p_xy, the distance is r = -F / |g|, and
     dr/dc = -(dF/dc + r d|g|/dc) / |g|.
     """
     pc = P @ c
@@ -210,14 +221,16 @@ def _residual_and_jacobian(P, p2, c, R, f):
     r = -F / gn
     dF = 2 * pc[:, None] * P - 2 * p2[:, None] * c
     # d g_j / dc = 2 c_j p + 2 (p.c) e_j - 4 p_j c, for j = x, y
-    dg = g[:, 0:1] * (2 * c[0] * P - 4 * P[:, 0:1] * c) + g[:, 1:2] * (2 * c[1] * P - 4 * P[:, 1:2] * c)
+    dg = (g[:, 0:1] * (2 * c[0] * P - 4 * P[:, 0:1] * c)
+          + g[:, 1:2] * (2 * c[1] * P - 4 * P[:, 1:2] * c))
     dg[:, :2] += 2 * pc[:, None] * g
     J = -(dF + r[:, None] * dg / gn[:, None]) / gn[:, None]
     return f * r, f * J
 
 
 def sphere_from_three_rays(xy1, xy2, xy3, R):
-    """Centres (..., 3) of the spheres of radius R touched by three rays (x, y, 1) each (normalized).
+    """
+    Centres (..., 3) of the spheres of radius R touched by three rays (x, y, 1) each (normalized).
 
     The cone's axis a makes the same angle beta with the three unit rays d_i, so it is normal to
     d1 - d2 and d2 - d3; cos(beta) = a.d1 and |c| = R / sin(beta). The minimal problem for RANSAC.
@@ -235,8 +248,11 @@ def sphere_from_three_rays(xy1, xy2, xy3, R):
 
 
 def ransac_sphere(xy, R, f, threshold_px=1.0, trials=32, rng=None):
-    """The sphere that most outline points (normalized) lie within ``threshold_px`` of, from ``trials``
-    random triples; refitted on those points (Taubin + closed form). Returns (c, inlier mask).
+    """
+    Find the sphere that most outline points (normalized) lie within ``threshold_px`` of.
+
+    The sphere is the best of those through ``trials`` random triples, refitted on the points
+    within the threshold of it (Taubin + closed form). Returns (c, inlier mask).
 
     With a quarter of the points wrong, a triple is clean with probability 0.42: 32 trials all miss
     with probability 3e-8. The draws are seeded: the same points give the same sphere.
@@ -246,11 +262,13 @@ def ransac_sphere(xy, R, f, threshold_px=1.0, trials=32, rng=None):
     if n < 5:
         raise ConicError(f'sphere fit: need at least 5 points, got {n}')
     rng = np.random.default_rng(0) if rng is None else rng
-    idx = np.argpartition(rng.random((trials, n)), 3, axis=1)[:, :3]     # three distinct points per trial
+    # three distinct points per trial
+    idx = np.argpartition(rng.random((trials, n)), 3, axis=1)[:, :3]
     C = sphere_from_three_rays(xy[idx[:, 0]], xy[idx[:, 1]], xy[idx[:, 2]], R)
     C = C[np.all(np.isfinite(C), axis=1) & (C[:, 2] > R)]
     if len(C) == 0:
-        raise ConicError('sphere fit: no three outline points describe a sphere in front of the camera')
+        raise ConicError('sphere fit: no three outline points describe a sphere '
+                         'in front of the camera')
     inliers = np.abs(f * sampson(xy, C, R)) < threshold_px
     best = inliers[np.argmax(inliers.sum(axis=1))]
     if best.sum() < 5:
@@ -260,7 +278,8 @@ def ransac_sphere(xy, R, f, threshold_px=1.0, trials=32, rng=None):
 
 
 def fit_sphere(xy, R, f, weights=None, c0=None):
-    """Taubin conic -> closed-form centre (C2) -> geometric refinement: a SphereFit.
+    """
+    Taubin conic -> closed-form centre (C2) -> geometric refinement: a SphereFit.
 
     ``c0``: a sphere whose outline lies within a pixel or so of the points (the one the outline was
     searched along); the refinement then starts from it and the conic is not needed.

@@ -1,4 +1,5 @@
-"""`./robotenis detect --camera-info FILE IMAGE...`: the sphere centre in each image, one line each.
+"""
+`./robotenis detect --camera-info FILE IMAGE...`: the sphere centre in each image, one line each.
 
 Prints ``x,y,z`` (m, optical frame: x right, y down, z forward) per image, in the order given. An
 image that cannot be read, or in which no sphere can be measured, gets a message on stderr and no
@@ -21,23 +22,26 @@ def default_radius():
 
 
 def read_image(path):
-    """A mono image as a 2-D array; ValueError naming the problem."""
+    """Read a mono image as a 2-D array; ValueError naming the problem."""
     if not os.path.isfile(path):
         raise ValueError('no such file')
     image = cv2.imread(path, cv2.IMREAD_UNCHANGED)
     if image is None:
         raise ValueError('cannot read the image (missing, empty or not an image file)')
     if image.ndim == 3:
-        image = cv2.cvtColor(image, cv2.COLOR_BGRA2GRAY if image.shape[2] == 4 else cv2.COLOR_BGR2GRAY)
+        code = cv2.COLOR_BGRA2GRAY if image.shape[2] == 4 else cv2.COLOR_BGR2GRAY
+        image = cv2.cvtColor(image, code)
     if image.dtype != np.uint8:
         raise ValueError(f'expected an 8-bit image, got {image.dtype}')
     return image
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(prog='detect', description=__doc__.split('\n')[0])
-    parser.add_argument('--camera-info', required=True, help='ROS camera_info YAML (camera_calibration_parsers format)')
-    parser.add_argument('--radius', type=float, default=None, help='sphere radius, m (default: the nominal description)')
+    parser = argparse.ArgumentParser(prog='detect', description=__doc__.strip().split('\n')[0])
+    parser.add_argument('--camera-info', required=True,
+                        help='ROS camera_info YAML (camera_calibration_parsers format)')
+    parser.add_argument('--radius', type=float, default=None,
+                        help='sphere radius, m (default: the nominal description)')
     parser.add_argument('--method', choices=detector.METHODS, default='conic')
     parser.add_argument('images', nargs='+')
     args = parser.parse_args(argv)
@@ -65,7 +69,8 @@ def main(argv=None):
         x, y, z = d.position
         print(f'{x:.9f},{y:.9f},{z:.9f}', flush=True)
     if failed:
-        print(f'detect: {failed} of {len(args.images)} images without a measurement', file=sys.stderr)
+        print(f'detect: {failed} of {len(args.images)} images without a measurement',
+              file=sys.stderr)
     return 1 if failed else 0
 
 

@@ -18,7 +18,8 @@ class DetectionError(ValueError):
 class Detection:
     position: np.ndarray        # (3,) sphere centre, optical frame, m
     covariance: np.ndarray      # (3, 3), m^2
-    edge_points: np.ndarray     # (n, 2) outline points used, ideal pixels (camera.distort_pixels: image's)
+    # (n, 2) outline points used, in ideal pixels (camera.distort_pixels gives the image's)
+    edge_points: np.ndarray
     fit_rms_px: float           # RMS distance of the points to the fitted outline, px
     method: str
     extra: dict = field(default_factory=dict)

@@ -1,4 +1,7 @@
-"""The calibration paper's method (section 5.2-5.3): tangent planes, least squares, ellipse correction.
+"""
+The calibration paper's method (section 5.2-5.3).
+
+Tangent planes, least squares, ellipse correction.
 
 Coordinates are undistorted normalized ones (x_u / f, y_u / f in the paper's "central image
 coordinates"), so alpha = x_u / f and beta = y_u / f directly (eqs. 10, 14).
@@ -7,11 +10,14 @@ coordinates"), so alpha = x_u / f and beta = y_u / f directly (eqs. 10, 14).
    lines through it: x_u1 < x_u2 and y_u1 < y_u2. As in the paper they are measured along those
    lines in the image (``image_crossings``: the sub-pixel profile model of robotenis_vision.edges),
    the sub-pixel outline only placing the lines (``chords``).
-2. Each crossing is taken as a tangent: the plane x = alpha z (resp. y = beta z) touches the sphere,
-   so its distance to the centre is R_B (eqs. 11, 15). With the centre between the two planes:
+2. Each crossing is taken as a tangent: the plane x = alpha z (resp. y = beta z) touches the
+   sphere, so its distance to the centre is R_B (eqs. 11, 15). With the centre between the two
+   planes:
 
-       X_B - alpha_1 Z_B = R_B sqrt(1 + alpha_1^2),   alpha_2 Z_B - X_B = R_B sqrt(1 + alpha_2^2)   (12)
-       Y_B - beta_1 Z_B  = R_B sqrt(1 + beta_1^2),    beta_2 Z_B - Y_B  = R_B sqrt(1 + beta_2^2)    (16)
+       X_B - alpha_1 Z_B = R_B sqrt(1 + alpha_1^2),
+       alpha_2 Z_B - X_B = R_B sqrt(1 + alpha_2^2)                                          (12)
+       Y_B - beta_1 Z_B  = R_B sqrt(1 + beta_1^2),
+       beta_2 Z_B - Y_B  = R_B sqrt(1 + beta_2^2)                                           (16)
 
    (the paper numbers alpha_1 on the other side; the pairs are the same): four linear equations in
    (X_B, Y_B, Z_B), solved by least squares.
@@ -30,7 +36,8 @@ from robotenis_vision import edges
 from robotenis_vision.detection import Detection, DetectionError
 
 ITERATIONS = 2
-MAX_SAG = 2e-4     # normalized (0.1 px at f = 500): how far a polygon side may cut inside the outline
+# normalized (0.1 px at f = 500): how far a polygon side may cut inside the outline
+MAX_SAG = 2e-4
 
 
 class PaperMethodError(ValueError):
@@ -44,8 +51,10 @@ def ordered(xy):
 
 
 def crossings(poly, axis, level, max_sag=MAX_SAG):
-    """Where the closed polygon crosses the line {axis coordinate = level}: the lowest and highest
-    value of the other coordinate (linear between vertices).
+    """
+    Find where the closed polygon crosses the line {axis coordinate = level}.
+
+    Returns the lowest and highest value of the other coordinate (linear between vertices).
 
     A polygon side of length L cuts inside an outline of radius r by L^2 / 8r; where profiles were
     dropped the side is long, and a crossing on a side cutting in by more than ``max_sag`` would be
@@ -64,13 +73,18 @@ def crossings(poly, axis, level, max_sag=MAX_SAG):
     radius = np.median(np.linalg.norm(poly - poly.mean(axis=0), axis=1))
     sag = np.sum((b[ends] - poly[ends]) ** 2, axis=1) / (8 * radius)
     if np.any(sag > max_sag):
-        raise PaperMethodError('the outline has a gap where the line through its centre crosses it')
+        raise PaperMethodError('the outline has a gap where the line through its centre '
+                               'crosses it')
     return values.min(), values.max()
 
 
 def chords(xy, max_sag=MAX_SAG):
-    """Centre (x_uc, y_uc) and crossings x_u1, x_u2, y_u1, y_u2 (normalized): the centre is moved to
-    the midpoints of the horizontal and vertical chords through it until it stays (three passes)."""
+    """
+    Find the centre (x_uc, y_uc) and crossings x_u1, x_u2, y_u1, y_u2 (normalized).
+
+    The centre is moved to the midpoints of the horizontal and vertical chords through it until it
+    stays (three passes).
+    """
     poly = ordered(xy)
     xc, yc = poly.mean(axis=0)
     for _ in range(3):
@@ -94,7 +108,8 @@ def corrected_extremes(centre_B, centre_uv, half_chord):
     X, Y, Z = centre_B
     theta_z = np.arccos(Z / np.sqrt(X * X + Y * Y + Z * Z))                  # (17)
     xc, yc = centre_uv
-    theta_r = np.arctan2(-xc, yc) if np.hypot(xc, yc) > 1e-12 else 0.0        # (20), see module docstring
+    # (20), see the module docstring
+    theta_r = np.arctan2(-xc, yc) if np.hypot(xc, yc) > 1e-12 else 0.0
     theta_e = np.arctan(-np.tan(theta_r) * np.cos(theta_z))                   # (22)
     a_e = abs(half_chord / (np.cos(theta_z) * np.cos(theta_e) * np.cos(theta_r)
                             - np.sin(theta_e) * np.sin(theta_r)))             # (22)
@@ -106,7 +121,11 @@ def corrected_extremes(centre_B, centre_uv, half_chord):
 
 
 def centre_from_chords(centre_uv, cross, R_B, iterations=ITERATIONS):
-    """The paper's sphere centre from the chord crossings: eqs. 12/16, then eqs. 17-22 ``iterations`` times."""
+    """
+    Compute the paper's sphere centre from the chord crossings.
+
+    Eqs. 12/16, then eqs. 17-22 ``iterations`` times.
+    """
     x1, x2, y1, y2 = cross
     B = tangent_planes((x1, x2), (y1, y2), R_B)
     for _ in range(iterations):
@@ -117,29 +136,35 @@ def centre_from_chords(centre_uv, cross, R_B, iterations=ITERATIONS):
 
 
 def paper_centre(cross, R_B, sigma_cross, iterations=ITERATIONS):
-    """Sphere centre (3,) and its covariance from the crossings x_u1, x_u2, y_u1, y_u2 (normalized).
+    """
+    Sphere centre (3,) and its covariance from the crossings x_u1, x_u2, y_u1, y_u2 (normalized).
 
-    The ellipse centre is their midpoints; sigma_cross (4,): their standard deviations (normalized),
-    independent, propagated through the method by finite differences.
+    The ellipse centre is their midpoints; sigma_cross (4,): their standard deviations
+    (normalized), independent, propagated through the method by finite differences.
     """
     cross = np.asarray(cross, dtype=float)
 
     def estimate(v):
-        return centre_from_chords(np.array([0.5 * (v[0] + v[1]), 0.5 * (v[2] + v[3])]), v, R_B, iterations)
+        return centre_from_chords(np.array([0.5 * (v[0] + v[1]), 0.5 * (v[2] + v[3])]), v, R_B,
+                                  iterations)
 
     B = estimate(cross)
     h = 1e-7
-    J = np.stack([(estimate(cross + h * e) - estimate(cross - h * e)) / (2 * h) for e in np.eye(4)], axis=1)
+    J = np.stack([(estimate(cross + h * e) - estimate(cross - h * e)) / (2 * h)
+                  for e in np.eye(4)], axis=1)
     return B, (J * np.asarray(sigma_cross) ** 2) @ J.T
 
 
 def image_crossings(img, camera, xy, sigma, half_width, passes=2):
-    """The crossings measured in the image, as the paper does: along the horizontal and vertical lines
-    through the ellipse centre, by the same sub-pixel profile model as the outline (edges.profile_edges).
+    """
+    Measure the crossings in the image, as the paper does.
+
+    Along the horizontal and vertical lines through the ellipse centre, by the same sub-pixel
+    profile model as the outline (edges.profile_edges).
 
     xy: outline points (normalized), which place the lines and the first guess (``chords``); each
-    pass moves the centre to the new chords' midpoints. Returns the centre, the crossings (normalized)
-    and their standard deviations (normalized).
+    pass moves the centre to the new chords' midpoints. Returns the centre, the crossings
+    (normalized) and their standard deviations (normalized).
     """
     centre, cross = chords(xy, max_sag=np.inf)
     ideal = camera.to_pixels(xy)
@@ -149,10 +174,12 @@ def image_crossings(img, camera, xy, sigma, half_width, passes=2):
         x1, x2, y1, y2 = cross
         xc, yc = centre
         points = camera.to_pixels(np.array([[x1, yc], [x2, yc], [xc, y1], [xc, y2]]))
+        # relative_contrast=0.0: four profiles have no 'typical' step
         fit, _ = edges.profile_edges(img, points, normals, np.full(4, 1 / r_px), half_width, sigma,
-                                     camera.distort_pixels, relative_contrast=0.0)   # four profiles: no 'typical' step
+                                     camera.distort_pixels, relative_contrast=0.0)
         if not np.all(fit.ok):
-            raise PaperMethodError('no edge with contrast where a line through the centre crosses the outline')
+            raise PaperMethodError('no edge with contrast where a line through the centre '
+                                   'crosses the outline')
         found = camera.to_normalized(points + fit.e[:, None] * normals)
         cross = np.array([found[0, 0], found[1, 0], found[2, 1], found[3, 1]])
         centre = np.array([0.5 * (cross[0] + cross[1]), 0.5 * (cross[2] + cross[3])])
@@ -160,8 +187,12 @@ def image_crossings(img, camera, xy, sigma, half_width, passes=2):
 
 
 def detect_from_outline(img, camera, R_B, xy, sigma, half_width, iterations=None):
-    """A detector.Detection by the paper's method (``iterations`` of the ellipse correction: the
-    paper's two by default, 0 for eqs. 9-16 alone); xy: the outline (normalized) that places the lines."""
+    """
+    Measure a detector.Detection by the paper's method.
+
+    ``iterations`` of the ellipse correction: the paper's two by default, 0 for eqs. 9-16 alone.
+    xy: the outline (normalized) that places the lines.
+    """
     iterations = ITERATIONS if iterations is None else iterations
     try:
         centre, cross, sigma_cross = image_crossings(img, camera, xy, sigma, half_width)

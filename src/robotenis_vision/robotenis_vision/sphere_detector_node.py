@@ -101,7 +101,8 @@ class SphereDetectorNode(Node):
             return
         self.batch.append(det)
         if len(self.batch) == self.frames:
-            avg = averaging.average([d.position for d in self.batch], [d.covariance for d in self.batch])
+            avg = averaging.average([d.position for d in self.batch],
+                                    [d.covariance for d in self.batch])
             det.position, det.covariance = avg.position, avg.covariance
             self.batch = []
             self.publish(det, msg.header, avg.frames)
@@ -113,7 +114,8 @@ class SphereDetectorNode(Node):
 
 
 def main(args=None):
-    return spin(SphereDetectorNode, 'sphere_detector', (ValueError, description.DescriptionError), args)
+    return spin(SphereDetectorNode, 'sphere_detector', (ValueError, description.DescriptionError),
+                args)
 
 
 if __name__ == '__main__':

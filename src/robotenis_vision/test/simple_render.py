@@ -1,11 +1,12 @@
-"""An independent renderer for the tests: the sphere's outline projected by OpenCV, filled at 16x.
+"""
+An independent renderer for the tests: the sphere's outline projected by OpenCV, filled at 16x.
 
-The outline is the circle where rays from the optical centre touch the sphere; OpenCV's projectPoints
-(its own plumb_bob implementation) gives its pixels; cv2.fillPoly draws the polygon (2,000 vertices)
-at 32 times the resolution with sub-pixel vertices; INTER_AREA brings it back (exact box filter).
-fillPoly fills every fine pixel the outline touches, half a fine pixel beyond the exact edge on
-average, so the vertices are first moved inward by half a fine pixel;
-then a Gaussian blur and Gaussian noise. The ball is uniformly bright, the background flat: what the
+The outline is the circle where rays from the optical centre touch the sphere; OpenCV's
+projectPoints (its own plumb_bob implementation) gives its pixels; cv2.fillPoly draws the polygon
+(2,000 vertices) at 32 times the resolution with sub-pixel vertices; INTER_AREA brings it back
+(exact box filter). fillPoly fills every fine pixel the outline touches, half a fine pixel beyond
+the exact edge on average, so the vertices are first moved inward by half a fine pixel; then a
+Gaussian blur and Gaussian noise. The ball is uniformly bright, the background flat: what the
 camera_model renderer adds (shading, texture, distortion maps) is absent, so the two share nothing.
 """
 import cv2
@@ -16,7 +17,7 @@ SHIFT = 4                       # fillPoly fixed-point bits: 1/16 of a fine pixe
 
 
 def outline_points(C, R, n=2000):
-    """Points (n, 3) where rays from the origin touch the sphere (C, R): built from two tangent vectors."""
+    """Points (n, 3) where rays from the origin touch sphere (C, R), via two tangent vectors."""
     C = np.asarray(C, dtype=float)
     d = np.linalg.norm(C)
     u = C / d
@@ -24,14 +25,14 @@ def outline_points(C, R, n=2000):
     a /= np.linalg.norm(a)
     b = np.cross(u, a)
     t = np.linspace(0, 2 * np.pi, n, endpoint=False)[:, None]
-    foot = d - R * R / d                      # distance of the touching circle's plane from the origin
+    foot = d - R * R / d          # distance of the touching circle's plane from the origin
     radius = R * np.sqrt(d * d - R * R) / d
     return foot * u + radius * (np.cos(t) * a + np.sin(t) * b)
 
 
 def project(camera, X):
-    uv, _ = cv2.projectPoints(np.asarray(X, dtype=np.float64).reshape(-1, 1, 3), np.zeros(3), np.zeros(3),
-                              camera.K, camera.D)
+    uv, _ = cv2.projectPoints(np.asarray(X, dtype=np.float64).reshape(-1, 1, 3), np.zeros(3),
+                              np.zeros(3), camera.K, camera.D)
     return uv.reshape(-1, 2)
 
 
@@ -42,15 +43,18 @@ def render(camera, C, R, rng=None, ball=200.0, background=80.0, blur_sigma=0.8, 
     hi = np.ceil(uv.max(axis=0)).astype(int) + 8
     lo, hi = np.maximum(lo, 0), np.minimum(hi, [camera.width, camera.height])
     w, h = hi - lo
-    # pixel (i, j) centre at i; in the fine box, pixel centres at SCALE * (i - lo) + (SCALE - 1) / 2
+    # pixel (i, j) centre at i; in the fine box, pixel centres at
+    # SCALE * (i - lo) + (SCALE - 1) / 2
     fine = (uv - lo + 0.5) * SCALE - 0.5
     tangent = np.roll(fine, -1, axis=0) - np.roll(fine, 1, axis=0)
-    inward = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1) / np.linalg.norm(tangent, axis=1)[:, None]
+    inward = (np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
+              / np.linalg.norm(tangent, axis=1)[:, None])
     if np.mean(np.sum(inward * (fine.mean(axis=0) - fine), axis=1)) < 0:
         inward = -inward
     fine = fine + 0.5 * inward
     mask = np.zeros((h * SCALE, w * SCALE), np.uint8)
-    cv2.fillPoly(mask, [np.round(fine * (1 << SHIFT)).astype(np.int32)], 255, lineType=cv2.LINE_8, shift=SHIFT)
+    cv2.fillPoly(mask, [np.round(fine * (1 << SHIFT)).astype(np.int32)], 255, lineType=cv2.LINE_8,
+                 shift=SHIFT)
     cover = cv2.resize(mask.astype(np.float32) / 255.0, (w, h), interpolation=cv2.INTER_AREA)
     image = np.full((camera.height, camera.width), background, np.float32)
     image[lo[1]:hi[1], lo[0]:hi[0]] = background + (ball - background) * cover

@@ -1,9 +1,8 @@
 """Averaging frames of one pose: outliers out, the mean's covariance honest (chi-square)."""
 import numpy as np
 import pytest
-from scipy.stats import chi2
-
 from robotenis_vision import averaging
+from scipy.stats import chi2
 
 TRUE = np.array([0.01, -0.02, 0.2])
 COV = np.array([[4e-10, 1e-10, 0.0], [1e-10, 9e-10, 0.0], [0.0, 0.0, 8e-9]])

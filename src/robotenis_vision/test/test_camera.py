@@ -14,7 +14,8 @@ def cam():
 
 def test_project_matches_opencv(cam):
     rng = np.random.default_rng(0)
-    X = np.column_stack([rng.uniform(-0.15, 0.15, 200), rng.uniform(-0.1, 0.1, 200), rng.uniform(0.15, 0.6, 200)])
+    X = np.column_stack([rng.uniform(-0.15, 0.15, 200), rng.uniform(-0.1, 0.1, 200),
+                         rng.uniform(0.15, 0.6, 200)])
     ours = cam.project(X)
     theirs, _ = cv2.projectPoints(X.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.K, cam.D)
     np.testing.assert_allclose(ours, theirs.reshape(-1, 2), atol=1e-9)
@@ -31,9 +32,10 @@ def test_undistort_inverts_distort_over_the_image(cam):
 
 def test_undistort_agrees_with_opencv(cam):
     uv = np.array([[10.0, 12.0], [600.0, 30.0], [320.0, 240.0], [500.5, 470.25]])
-    theirs = cv2.undistortPoints(uv.reshape(-1, 1, 2), cam.K, cam.D,
-                                 criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-15))
-    # OpenCV iterates a fixed point to its own tolerance: agreement to 1e-4 px (f = 500) is its precision
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-15)
+    theirs = cv2.undistortPoints(uv.reshape(-1, 1, 2), cam.K, cam.D, criteria=criteria)
+    # OpenCV iterates a fixed point to its own tolerance: agreement to 1e-4 px (f = 500) is its
+    # precision
     np.testing.assert_allclose(cam.pixel_rays(uv), theirs.reshape(-1, 2), atol=2e-7)
 
 
@@ -60,7 +62,8 @@ def test_yaml_round_trip_and_shipped_default(tmp_path):
 def test_camera_info_fields_round_trip():
     cam = cm.default()
     fields = cam.camera_info_fields()
-    assert fields['distortion_model'] == 'plumb_bob' and len(fields['k']) == 9 and len(fields['p']) == 12
+    assert (fields['distortion_model'] == 'plumb_bob' and len(fields['k']) == 9
+            and len(fields['p']) == 12)
     back = cm.from_camera_info(fields)
     np.testing.assert_array_equal(back.K, cam.K)
     np.testing.assert_array_equal(back.D, cam.D)
@@ -71,7 +74,8 @@ def test_camera_info_fields_round_trip():
     (lambda d: d['camera_matrix'].update(data=[1.0, 2.0]), 'camera_matrix'),
     (lambda d: d.update(distortion_model='equidistant'), 'distortion_model'),
     (lambda d: d.update(image_width=-3), 'image_width'),
-    (lambda d: d['distortion_coefficients'].update(data=['a', 0, 0, 0, 0]), 'distortion_coefficients'),
+    (lambda d: d['distortion_coefficients'].update(data=['a', 0, 0, 0, 0]),
+     'distortion_coefficients'),
 ])
 def test_bad_camera_info_names_the_key(edit, message):
     data = cm.default().to_yaml_dict()

@@ -1,17 +1,16 @@
 """The closed form from conic to sphere centre, the Taubin fit and the geometric refinement."""
 import numpy as np
 import pytest
-from scipy.stats import chi2
-
 from robotenis_vision import conic
 from robotenis_vision.conic import ConicError
+from scipy.stats import chi2
 
 R = 0.0095
 F = 500.0
 
 
 def outline_xy(c, R, n=200):
-    """Exact outline points (normalized) of sphere (c, R): touching rays built from the cone's geometry."""
+    """Exact normalized outline points of sphere (c, R): touching rays from the cone's geometry."""
     d = np.linalg.norm(c)
     u = c / d
     a = np.cross(u, [1.0, 0.0, 0.0])
@@ -23,19 +22,21 @@ def outline_xy(c, R, n=200):
     return rays[:, :2] / rays[:, 2:]
 
 
-CENTRES = [np.array(c) for c in ([0.0, 0.0, 0.2], [0.05, 0.03, 0.2], [-0.15, 0.1, 0.45], [0.2, -0.14, 0.6], [0.0, 0.0, 0.15])]
+CENTRES = [np.array(c) for c in ([0.0, 0.0, 0.2], [0.05, 0.03, 0.2], [-0.15, 0.1, 0.45],
+                                 [0.2, -0.14, 0.6], [0.0, 0.0, 0.15])]
 
 
 @pytest.mark.parametrize('c', CENTRES)
 def test_closed_form_inverts_the_cone_at_any_scale(c):
     Q = conic.sphere_conic(c, R)
     for scale in (1.0, -3.7, 1e-6):
-        np.testing.assert_allclose(conic.sphere_from_conic(scale * Q, R), c, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(conic.sphere_from_conic(scale * Q, R), c, rtol=1e-12,
+                                   atol=1e-15)
 
 
 @pytest.mark.parametrize('c', CENTRES)
 def test_taubin_then_closed_form_recovers_the_centre_from_projected_points(c):
-    """Noise-free points of the projected outline: the fitted conic is the cone, the centre exact."""
+    """Noise-free projected outline points: the fitted conic is the cone, the centre exact."""
     xy = outline_xy(c, R)
     Q = conic.taubin(xy)
     p = np.column_stack([xy, np.ones(len(xy))])
@@ -50,13 +51,14 @@ def test_sampson_distance_is_the_pixel_distance_near_the_outline():
     c = CENTRES[1]
     xy = outline_xy(c, R, 50)
     centre = c[:2] / c[2]
-    out = xy + 1e-3 * (xy - centre) / np.linalg.norm(xy - centre, axis=1, keepdims=True)   # 0.5 px outward
+    # 0.5 px outward
+    out = xy + 1e-3 * (xy - centre) / np.linalg.norm(xy - centre, axis=1, keepdims=True)
     d = F * conic.sampson(out, c, R)
     np.testing.assert_allclose(d, 0.5, rtol=0.05)
 
 
 def test_refined_centre_errors_match_the_predicted_covariance():
-    """Gaussian noise on the points: the normalized estimation error squared averages 3 (chi-square)."""
+    """Gaussian point noise: the normalized estimation error squared averages 3 (chi-square)."""
     rng = np.random.default_rng(4)
     sigma_px, runs = 0.1, 200
     nees = []
@@ -72,8 +74,12 @@ def test_refined_centre_errors_match_the_predicted_covariance():
 
 @pytest.mark.parametrize('c', CENTRES)
 def test_refinement_from_a_nearby_sphere_needs_no_conic(c):
-    """Started from a sphere whose outline is a pixel off (the one the detector's profiles were laid
-    along), the refinement reaches the Taubin-started estimate to a thousandth of its own sigma."""
+    """
+    Refine from a sphere whose outline is a pixel off, without the conic.
+
+    Started from such a sphere (the one the detector's profiles were laid along), the refinement
+    reaches the Taubin-started estimate to a thousandth of its own sigma.
+    """
     rng = np.random.default_rng(2)
     xy = outline_xy(c, R, 150) + rng.normal(scale=0.1 / F, size=(150, 2))
     c0 = c * (1 + R / np.linalg.norm(c) * 0.5 / (F * R / c[2])) + [c[2] / F, -c[2] / F, 0.0]
@@ -107,7 +113,8 @@ def test_bad_input_is_named():
 @pytest.mark.parametrize('c', CENTRES)
 def test_three_touching_rays_fix_the_sphere(c):
     xy = outline_xy(c, R, 30)
-    np.testing.assert_allclose(conic.sphere_from_three_rays(xy[0], xy[11], xy[23], R), c, rtol=1e-9)
+    np.testing.assert_allclose(conic.sphere_from_three_rays(xy[0], xy[11], xy[23], R), c,
+                               rtol=1e-9)
 
 
 def test_ransac_ignores_points_that_caught_the_highlight():
@@ -118,7 +125,7 @@ def test_ransac_ignores_points_that_caught_the_highlight():
     xy[10:25] = centre + 0.8 * (xy[10:25] - centre)          # a quarter of the points well inside
     fit, inliers = conic.ransac_sphere(xy, R, F, threshold_px=1.0)
     assert not np.any(inliers[10:25]) and np.all(inliers[25:])
-    # the refit uses the 45 good points: within 4 sigma of the truth in depth for 0.2 px point noise
+    # the refit uses the 45 good points: within 4 sigma of the true depth for 0.2 px point noise
     depth_sigma = 0.2 / F * c[2] ** 2 / R / np.sqrt(45 / 2)
     assert abs(fit[2] - c[2]) < 4 * depth_sigma
 
@@ -131,6 +138,7 @@ def test_sampson_jacobian_matches_finite_differences():
     r, J = conic._residual_and_jacobian(P, np.sum(P * P, axis=1), c, R, F)
     np.testing.assert_allclose(r, F * conic.sampson(xy, c, R), rtol=1e-12)
     h = 1e-7
-    numeric = np.stack([(F * conic.sampson(xy, c + h * e, R) - F * conic.sampson(xy, c - h * e, R)) / (2 * h)
+    numeric = np.stack([(F * conic.sampson(xy, c + h * e, R)
+                         - F * conic.sampson(xy, c - h * e, R)) / (2 * h)
                         for e in np.eye(3)], axis=1)
     np.testing.assert_allclose(J, numeric, rtol=1e-5, atol=1e-6 * np.abs(J).max())

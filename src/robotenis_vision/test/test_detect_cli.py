@@ -5,8 +5,8 @@ import sys
 import cv2
 import numpy as np
 
-import simple_render
 from robotenis_vision import camera
+import simple_render
 
 R = 0.0095
 CENTRES = [np.array([0.02, -0.01, 0.22]), np.array([-0.04, 0.03, 0.3])]
@@ -39,7 +39,8 @@ def test_good_unreadable_empty_and_blank_images(tmp_path):
     assert len(lines) == 2
     for line, c in zip(lines, CENTRES):
         xyz = np.array([float(v) for v in line.split(',')])
-        assert np.linalg.norm(xyz - c) < 1e-3          # a millimetre: the lines are the right images, in order
+        # a millimetre: the lines are the right images, in order
+        assert np.linalg.norm(xyz - c) < 1e-3
     for name in ('notes.png', 'empty.png', 'blank.png'):
         assert name in result.stderr
     assert 'no sphere' in result.stderr

@@ -1,4 +1,5 @@
-"""detect() on images of an independent OpenCV renderer (simple_render; the simulator's: robotenis_sim).
+"""
+detect() on images of an independent OpenCV renderer (simple_render, not robotenis_sim's).
 
 Tolerances: an outline point is found to RESOLUTION_PX = 1/50 px on noise-free blurred discs
 (test_edges), so a noise-free centre is good to that over the ball's apparent radius along the line
@@ -7,12 +8,11 @@ covariance predicts (chi-square) and the mean is within that resolution plus 3 s
 """
 import numpy as np
 import pytest
-from scipy.stats import chi2
-
-import simple_render
 from robotenis_vision import camera as camera_model_vision
 from robotenis_vision import detector
 from robotenis_vision.detector import DetectionError
+from scipy.stats import chi2
+import simple_render
 
 R = 0.0095
 RESOLUTION_PX = 0.02
@@ -23,7 +23,8 @@ def split(error, c):
     """Error components along the line of sight and across it (m)."""
     u = c / np.linalg.norm(c)
     along = error @ u
-    return along, np.linalg.norm(error - np.outer(np.atleast_1d(along), u).reshape(np.shape(error)), axis=-1)
+    perpendicular = error - np.outer(np.atleast_1d(along), u).reshape(np.shape(error))
+    return along, np.linalg.norm(perpendicular, axis=-1)
 
 
 def tolerances(c):
@@ -33,8 +34,8 @@ def tolerances(c):
     return d * RESOLUTION_PX / r_px, d * RESOLUTION_PX / CAM.fx
 
 
-POSITIONS = [np.array(c) for c in ([0.0, 0.0, 0.2], [0.05, 0.03, 0.2], [0.1, -0.06, 0.3], [-0.12, 0.09, 0.25],
-                                   [0.15, 0.08, 0.45], [0.0, 0.0, 0.15])]
+POSITIONS = [np.array(c) for c in ([0.0, 0.0, 0.2], [0.05, 0.03, 0.2], [0.1, -0.06, 0.3],
+                                   [-0.12, 0.09, 0.25], [0.15, 0.08, 0.45], [0.0, 0.0, 0.15])]
 
 
 @pytest.mark.parametrize('c', POSITIONS)
@@ -49,7 +50,8 @@ def test_noise_free_independent_render_is_measured_to_the_resolution(c):
 def test_scatter_and_bias_with_noise_match_the_covariance(c):
     rng = np.random.default_rng(11)
     runs = 25
-    dets = [detector.detect(simple_render.render(CAM, c, R, rng, noise_sigma=2.0), CAM, R) for _ in range(runs)]
+    dets = [detector.detect(simple_render.render(CAM, c, R, rng, noise_sigma=2.0), CAM, R)
+            for _ in range(runs)]
     errors = np.array([d.position for d in dets]) - c
     P = np.mean([d.covariance for d in dets], axis=0)
     spread = errors - errors.mean(axis=0)
@@ -67,9 +69,13 @@ def test_scatter_and_bias_with_noise_match_the_covariance(c):
 
 @pytest.mark.parametrize('c', [POSITIONS[1], POSITIONS[4]])
 def test_a_prior_from_the_last_frame_gives_the_same_centre(c):
-    """The node's stream: the outline looked for where the previous frame's sphere was (the ball
-    moved half a pixel since) and the sphere refined from it, to the same resolution as from
-    scratch; a prior 30 px off falls back to the search."""
+    """
+    Seed the detection with the previous frame's, as the node's stream does.
+
+    The outline is looked for where the previous frame's sphere was (the ball moved half a pixel
+    since) and the sphere refined from it, to the same resolution as from scratch; a prior 30 px
+    off falls back to the search.
+    """
     image = simple_render.render(CAM, c, R)
     moved = c + np.array([0.5, -0.3, 0.0]) * c[2] / CAM.fx
     prior = detector.detect(simple_render.render(CAM, moved, R), CAM, R)
@@ -82,8 +88,12 @@ def test_a_prior_from_the_last_frame_gives_the_same_centre(c):
 
 
 def test_paper_method_on_axis_is_exact_and_baseline_runs():
-    """On the axis the chords are diameters and eqs. 12/16 are exact; each of the four crossings is
-    good to the resolution plus the sag of the outline polygon between points (spacing^2 / 8 r)."""
+    """
+    On the axis the chords are diameters and eqs. 12/16 are exact.
+
+    Each of the four crossings is good to the resolution plus the sag of the outline polygon
+    between points (spacing^2 / 8 r).
+    """
     c = POSITIONS[0]
     image = simple_render.render(CAM, c, R)
     paper = detector.detect(image, CAM, R, 'paper')
@@ -101,7 +111,8 @@ def test_what_cannot_be_measured_is_refused_with_a_reason():
     with pytest.raises(DetectionError, match='no sphere'):
         detector.detect(blank, CAM, R)
     c = np.array([0.13, 0.0, 0.2])
-    assert CAM.project(c)[0] + CAM.fx * R / 0.2 > CAM.width                 # the ball reaches past x = 640
+    # the ball reaches past x = 640
+    assert CAM.project(c)[0] + CAM.fx * R / 0.2 > CAM.width
     cut = simple_render.render(CAM, c, R)
     with pytest.raises(DetectionError, match='border'):
         detector.detect(cut, CAM, R)

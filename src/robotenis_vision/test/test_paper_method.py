@@ -1,4 +1,4 @@
-"""The paper's tangent planes (eqs. 12, 16) and ellipse correction (eqs. 17-22) on exact outlines."""
+"""The paper's tangent planes (eqs. 12, 16) and ellipse correction (17-22) on exact outlines."""
 import numpy as np
 import pytest
 
@@ -20,10 +20,14 @@ def test_on_the_axis_the_tangent_planes_are_exact():
     assert error(c, 0) < 1e-9 and error(c, 2) < 1e-9
 
 
-@pytest.mark.parametrize('c', [[0.05, 0.03, 0.2], [0.1, -0.06, 0.3], [-0.12, 0.09, 0.25], [0.15, 0.08, 0.45]])
+@pytest.mark.parametrize('c', [[0.05, 0.03, 0.2], [0.1, -0.06, 0.3], [-0.12, 0.09, 0.25],
+                               [0.15, 0.08, 0.45]])
 def test_the_ellipse_correction_removes_most_of_the_chord_error(c):
-    """Off both axes the chords through the centre are not the tangent points: eqs. 17-22 fix that
-    (the paper: a second iteration brings no appreciable improvement)."""
+    """
+    Off both axes the chords through the centre are not the tangent points: eqs. 17-22 fix that.
+
+    (The paper: a second iteration brings no appreciable improvement.)
+    """
     c = np.array(c)
     raw, once, twice = error(c, 0), error(c, 1), error(c, 2)
     assert once < 0.05 * raw
@@ -46,10 +50,10 @@ def test_points_that_do_not_surround_their_centre_are_refused():
 
 
 def test_a_gap_at_a_crossing_is_refused():
-    """Profiles dropped where the horizontal line meets the outline: no crossing to measure there."""
+    """Profiles dropped where the horizontal line meets the outline: no crossing to measure."""
     c = np.array([0.05, 0.03, 0.2])
     xy = outline_xy(c, R, 720)
     centre = c[:2] / c[2]
     angle = np.arctan2(xy[:, 1] - centre[1], xy[:, 0] - centre[0])
     with pytest.raises(PaperMethodError, match='gap'):
-        paper_method.chords(xy[np.abs(angle) > 0.2])          # 23 degrees missing around the right end
+        paper_method.chords(xy[np.abs(angle) > 0.2])  # 23 degrees missing around the right end
