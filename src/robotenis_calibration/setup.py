@@ -14,7 +14,8 @@ setup(
     zip_safe=True,
     maintainer='RoboTenis maintainers',
     maintainer_email='maintainers@robotenis.org',
-    description="""The calibration service, rosbag2 sessions, and the residual loop that finds what the model lacks.""",
+    description=('The calibration service, rosbag2 sessions, and the residual loop that finds'
+                 ' what the model lacks.'),
     license='Apache-2.0',
     # Declaring pytest makes colcon test run pytest; without it unittest runs and finds 0 tests.
     extras_require={'test': ['pytest']},

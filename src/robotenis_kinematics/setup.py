@@ -17,7 +17,8 @@ setup(
     zip_safe=True,
     maintainer='RoboTenis maintainers',
     maintainer_email='maintainers@robotenis.org',
-    description="""Delta robot kinematics in the calibration paper's notation, the robot description, and the identification core (eqs. 1-8).""",
+    description=("Delta robot kinematics in the calibration paper's notation, the robot"
+                 ' description, and the identification core (eqs. 1-8).'),
     license='Apache-2.0',
     # Declaring pytest makes colcon test run pytest; without it unittest runs and finds 0 tests.
     extras_require={'test': ['pytest']},

@@ -1,23 +1,24 @@
-"""rosbag2 bags with MCAP storage: writing a session, and reading whatever of a bag survived.
+"""
+rosbag2 bags with MCAP storage: writing a session, and reading whatever of a bag survived.
 
 Writing (BagWriter): rosbag2 format version 9, MCAP storage with zstd-compressed chunks (what
-rosbag2's own MCAP plugin writes), so ``ros2 bag info/play`` and Foxglove open the bags. Messages are
-stored as the CDR bytes the caller gives. The project's own types (robotenis_interfaces) are
+rosbag2's own MCAP plugin writes), so ``ros2 bag info/play`` and Foxglove open the bags. Messages
+are stored as the CDR bytes the caller gives. The project's own types (robotenis_interfaces) are
 registered in the typestore from their .msg files, found in the installed interfaces package or,
 without a build, in the source tree.
 
 Reading (BagReader): rosbags' AnyReader on a whole bag. A bag whose recorder died has an MCAP file
 cut short (no footer) and maybe no metadata.yaml; AnyReader refuses it, so the reader falls back to
-the ``mcap`` library's stream reader, which yields every whole record before the cut (the chunk being
-written when the file was cut is lost), and says in ``notes`` how many messages it recovered.
+the ``mcap`` library's stream reader, which yields every whole record before the cut (the chunk
+being written when the file was cut is lost), and says in ``notes`` how many messages it recovered.
 Message times: the header stamp for messages that have a header (when the recorder stamped it),
 otherwise the time the message was recorded.
 """
+from collections import Counter
 import functools
 import os
-import struct
-from collections import Counter
 from pathlib import Path
+import struct
 from typing import NamedTuple
 
 from mcap.exceptions import McapError
@@ -27,26 +28,28 @@ from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.serde import SerdeError
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 
 INTERFACES = 'robotenis_interfaces'
 
 
 def interface_msg_dir():
-    """Folder of the .msg files of robotenis_interfaces: installed share folder, else the source tree."""
+    """Locate robotenis_interfaces' .msg files: installed share folder, else the source tree."""
     try:
         from ament_index_python.packages import get_package_share_directory
         folder = os.path.join(get_package_share_directory(INTERFACES), 'msg')
-    except Exception:  # not built, or ament_index not importable: the source tree has the same files
-        folder = os.path.join(os.path.dirname(os.path.realpath(__file__)), '..', '..', INTERFACES, 'msg')
+    except Exception:  # unbuilt, or ament_index not importable: the source tree has the same files
+        here = os.path.dirname(os.path.realpath(__file__))
+        folder = os.path.join(here, '..', '..', INTERFACES, 'msg')
     if not os.path.isdir(folder):
-        raise FileNotFoundError(f'{INTERFACES}: no msg folder (looked in {os.path.normpath(folder)})')
+        raise FileNotFoundError(f'{INTERFACES}: no msg folder'
+                                f' (looked in {os.path.normpath(folder)})')
     return folder
 
 
 @functools.lru_cache(maxsize=1)
 def typestore():
-    """The ROS 2 Jazzy typestore plus the robotenis_interfaces messages."""
+    """Return the ROS 2 Jazzy typestore plus the robotenis_interfaces messages."""
     store = get_typestore(Stores.ROS2_JAZZY)
     folder = interface_msg_dir()
     types = {}
@@ -59,11 +62,12 @@ def typestore():
 
 
 def png(pixels):
-    """Lossless PNG bytes of an image array (mono8: (h, w) uint8), for sensor_msgs/CompressedImage."""
+    """Encode a mono8 (h, w) uint8 image array as lossless PNG for sensor_msgs/CompressedImage."""
     import cv2
     ok, data = cv2.imencode('.png', pixels)
     if not ok:
-        raise ValueError(f'cannot encode an image of shape {pixels.shape} and type {pixels.dtype} as PNG')
+        raise ValueError(f'cannot encode an image of shape {pixels.shape}'
+                         f' and type {pixels.dtype} as PNG')
     return data.tobytes()
 
 
@@ -71,7 +75,7 @@ PNG_FORMAT = 'mono8; png compressed mono8'   # CompressedImage.format of a PNG o
 
 
 def serialize(msg, type_name):
-    """CDR bytes of a rosbags message object."""
+    """Return the CDR bytes of a rosbags message object."""
     return bytes(typestore().serialize_cdr(msg, type_name))
 
 
@@ -88,10 +92,11 @@ class BagWriter:
         self.path = str(path)
 
     def add_topic(self, topic, type_name):
-        """Declare a topic and its type (e.g. 'sensor_msgs/msg/JointState') before writing to it."""
+        """Declare a topic and its type (e.g. 'sensor_msgs/msg/JointState') before any write."""
         if type_name not in typestore().types:
             raise ValueError(f'{topic}: unknown message type {type_name!r}')
-        self._connections[topic] = self._writer.add_connection(topic, type_name, typestore=typestore())
+        self._connections[topic] = self._writer.add_connection(topic, type_name,
+                                                               typestore=typestore())
 
     def write(self, topic, stamp_ns, data):
         """Record one message: its CDR bytes, at ``stamp_ns`` (ns)."""
@@ -122,7 +127,7 @@ class Record(NamedTuple):
 
 
 class BagReader:
-    """A rosbag2 bag directory opened for reading; ``topics`` {topic: type}, ``counts`` {topic: n}."""
+    """A rosbag2 bag folder opened for reading; ``topics`` {topic: type}, ``counts`` {topic: n}."""
 
     def __init__(self, bag_dir):
         self.path = Path(bag_dir)
@@ -138,11 +143,13 @@ class BagReader:
             self._any = None
             if not self._files:
                 raise ValueError(f'{bag_dir}: not a readable rosbag2 bag ({e})') from e
-            self.notes.append(f'{bag_dir}: cannot be read whole ({e}); reading every whole MCAP record')
+            self.notes.append(f'{bag_dir}: cannot be read whole ({e});'
+                              ' reading every whole MCAP record')
             self.topics, self.counts = self._scan()
         else:
             self.topics = {c.topic: c.msgtype for c in self._any.connections}
-            self.counts = {t: sum(c.msgcount for c in self._any.connections if c.topic == t) for t in self.topics}
+            self.counts = {t: sum(c.msgcount for c in self._any.connections if c.topic == t)
+                           for t in self.topics}
 
     def close(self):
         if self._any is not None:
@@ -156,8 +163,11 @@ class BagReader:
         self.close()
 
     def _stream(self, seen=None):
-        """(topic, type name, mcap Message) of every whole message record of the MCAP files, in file
-        order; the topics declared on the way go to ``seen`` {topic: type}."""
+        """
+        Yield (topic, type name, mcap Message) of every whole message record of the MCAP files.
+
+        In file order; the topics declared on the way go to ``seen`` {topic: type}.
+        """
         for path in self._files:
             schemas, channels = {}, {}
             with open(path, 'rb') as f:
@@ -175,15 +185,20 @@ class BagReader:
                     continue  # the cut: every whole record before it has been read
 
     def _scan(self):
-        """Topics, types and message counts of a bag AnyReader refused (one pass over its records)."""
+        """Scan a bag AnyReader refused for topics, types, counts (one pass over its records)."""
         topics = {}
         counts = Counter(topic for topic, _, _ in self._stream(topics))
-        self.notes.append(f'{sum(counts.values())} messages recovered from {self.path} (whole records only)')
+        self.notes.append(f'{sum(counts.values())} messages recovered from {self.path}'
+                          ' (whole records only)')
         return topics, {t: counts.get(t, 0) for t in topics}
 
     def records(self, topics=None, progress=None, steps=100):
-        """Stored messages of ``topics`` (all when None) as Records; time order for a whole bag, file
-        order for a truncated one. ``progress(done, total)`` is called ``steps`` times on the way."""
+        """
+        Yield the stored messages of ``topics`` (all when None) as Records.
+
+        Time order for a whole bag, file order for a truncated one. ``progress(done, total)`` is
+        called ``steps`` times on the way.
+        """
         wanted = set(self.topics) if topics is None else set(topics) & set(self.topics)
         total = sum(self.counts[t] for t in wanted)
         step = max(1, total // steps)
@@ -203,8 +218,12 @@ class BagReader:
                     yield Record(topic, type_name, m.log_time, bytes(m.data))
 
     def messages(self, topics=None, progress=None, steps=100):
-        """(topic, type name, stamp_ns, message) of ``topics``: deserialized, with the header stamp
-        when the message has a non-zero one, the recording time otherwise."""
+        """
+        Yield (topic, type name, stamp_ns, message) of ``topics``, deserialized.
+
+        The stamp is the header stamp when the message has a non-zero one, the recording time
+        otherwise.
+        """
         store = typestore()
         broken = Counter()
         for r in self.records(topics, progress, steps):
@@ -212,7 +231,8 @@ class BagReader:
                 decode = FAST_DECODERS.get(r.type_name)
                 msg = decode(r.data) if decode else store.deserialize_cdr(r.data, r.type_name)
             except KeyError as e:
-                raise ValueError(f'{r.topic}: message type {r.type_name!r} is not known to the typestore') from e
+                raise ValueError(f'{r.topic}: message type {r.type_name!r}'
+                                 ' is not known to the typestore') from e
             except (SerdeError, struct.error, ValueError):
                 broken[r.topic] += 1       # a corrupt record: skip it, say so once per topic below
                 continue
@@ -222,7 +242,7 @@ class BagReader:
 
 
 def stamp_ns(msg, log_ns):
-    """The header stamp of ``msg`` in ns, or ``log_ns`` when it has no header or a zero stamp."""
+    """Return ``msg``'s header stamp in ns, or ``log_ns`` when it has no header or a zero stamp."""
     header = getattr(msg, 'header', None)
     if header is None or (header.stamp.sec == 0 and header.stamp.nanosec == 0):
         return log_ns
@@ -250,11 +270,12 @@ class JointStateMsg(NamedTuple):
 
 
 def decode_joint_state(data):
-    """sensor_msgs/JointState from its CDR bytes (XCDR1, either byte order).
+    """
+    Decode a sensor_msgs/JointState from its CDR bytes (XCDR1, either byte order).
 
-    Written out because the typestore's decoder is strict where serializers differ: rclpy's Fast CDR
-    does not pad before an empty float64 sequence, so a JointState with an empty ``effort`` (most
-    drivers', and ours) fails its size check. Alignment is relative to the end of the 4-byte
+    Written out because the typestore's decoder is strict where serializers differ: rclpy's Fast
+    CDR does not pad before an empty float64 sequence, so a JointState with an empty ``effort``
+    (most drivers', and ours) fails its size check. Alignment is relative to the end of the 4-byte
     encapsulation, and a float64 sequence aligns to 8 only when it has elements.
     """
     data = bytes(data)

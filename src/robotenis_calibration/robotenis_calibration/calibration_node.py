@@ -62,7 +62,7 @@ PARAMETERS = {
     'results_dir': ('bags', 'folder of the calibration results'),
     'num_poses': (300, 'poses of a session (a request may ask for others)'),
     'frames_per_pose': (500, 'detections averaged per rest'),
-    'settle_time': (4.0, 's waited at rest before measuring (the paper\'s 4 s)'),
+    'settle_time': (4.0, "s waited at rest before measuring (the paper's 4 s)"),
     'holdout_fraction': (0.3, 'share of the rests held out to test the calibration'),
     'detector_floor': ([5e-4, 3e-3], "the detector's systematic error (lateral, depth) as "
                                      'fractions of the range: pipeline.with_detector_floor'),
@@ -72,7 +72,7 @@ PARAMETERS = {
 
 
 def bag_topic(name):
-    """The contract's name of a topic in the bag: the node's relative name from the root."""
+    """Return the contract's name of a topic in the bag: the node's relative name from the root."""
     return '/' + name.lstrip('/')
 
 
@@ -188,7 +188,8 @@ class CalibrationNode(Node):
 
     async def on_calibrate(self, request, response):
         if self.busy:
-            response.success, response.message = False, 'busy: a calibration session is already running'
+            response.success = False
+            response.message = 'busy: a calibration session is already running'
             return response
         self.busy = True
         try:
@@ -211,21 +212,25 @@ class CalibrationNode(Node):
     async def run_session(self, request, response):
         guess = np.asarray(self.get_parameter('sphere_guess').value, dtype=float)
         if guess.shape != (3,) or not np.all(np.isfinite(guess)):
-            raise ValueError('the parameter sphere_guess (the ball\'s rough position, base frame, '
+            raise ValueError("the parameter sphere_guess (the ball's rough position, base frame, "
                              f'm) is not set: got {guess.tolist()}; give it in the launch '
                              'configuration (robotenis_bringup/config/calibration.params.yaml)')
         declared = description.load(self.get_parameter('description_path').value)
         n = self.param('num_poses', request.num_poses)
-        config = RunnerConfig(frames_per_pose=self.param('frames_per_pose', request.frames_per_pose),
-                              settle_time=request.settle_time if request.settle_time > 0
-                              else self.get_parameter('settle_time').value)
+        config = RunnerConfig(
+            frames_per_pose=self.param('frames_per_pose', request.frames_per_pose),
+            settle_time=request.settle_time if request.settle_time > 0
+            else self.get_parameter('settle_time').value)
         rng = np.random.default_rng(request.seed)
         planned = poses.select(request.pose_selection or 'boundary', declared, guess, n, rng)
         stamp = time.strftime('%Y%m%d-%H%M%S')
-        bag = request.bag_path or os.path.join(self.get_parameter('bags_dir').value, f'session-{stamp}')
-        result_path = os.path.join(self.get_parameter('results_dir').value, f'calibration-{stamp}.yaml')
+        bag = request.bag_path or os.path.join(self.get_parameter('bags_dir').value,
+                                               f'session-{stamp}')
+        result_path = os.path.join(self.get_parameter('results_dir').value,
+                                   f'calibration-{stamp}.yaml')
         self.open_bag(bag, description.dumps(declared))
-        self.get_logger().info(f'session: {len(planned)} poses ({request.pose_selection or "boundary"}), '
+        self.get_logger().info(f'session: {len(planned)} poses'
+                               f' ({request.pose_selection or "boundary"}), '
                                f'{config.frames_per_pose} frames each, recording {bag}')
         self.finished = Future()
 
@@ -237,13 +242,16 @@ class CalibrationNode(Node):
                 again = poses.select(request.pose_selection or 'boundary', declared, refined, n,
                                      rng)
             except ValueError as e:
-                self.get_logger().warn(f'ball guess refined from {len(rests)} rests, but {e}: the plan is kept')
+                self.get_logger().warn(f'ball guess refined from {len(rests)} rests, but {e}:'
+                                       ' the plan is kept')
                 return None
-            self.get_logger().info(f'ball guess refined from {len(rests)} rests (moved {moved * 1e3:.0f} mm): '
+            self.get_logger().info(f'ball guess refined from {len(rests)} rests'
+                                   f' (moved {moved * 1e3:.0f} mm): '
                                    f'the last {n} poses planned again')
             return again
 
-        self.runner = SessionRunner(planned, config, replan if self.get_parameter('replan').value else None)
+        on_replan = replan if self.get_parameter('replan').value else None
+        self.runner = SessionRunner(planned, config, on_replan)
         self.runner.start(self.now())
         await self.finished
         skipped = list(self.runner.skipped)
@@ -251,7 +259,8 @@ class CalibrationNode(Node):
         response.bag_path = bag
         outcome = pipeline.calibrate_bag(
             bag, result_path, self.get_parameter('holdout_fraction').value, request.seed,
-            progress=lambda text: self.publish_progress('identifying', len(planned) - 1, len(planned), 1.0, text),
+            progress=lambda text: self.publish_progress('identifying', len(planned) - 1,
+                                                        len(planned), 1.0, text),
             detector_floor=tuple(self.get_parameter('detector_floor').value))
         d = outcome.diagnosis
         response.success = True

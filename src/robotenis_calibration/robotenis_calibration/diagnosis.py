@@ -1,4 +1,5 @@
-"""The residual loop: find what the model lacks, add it, and prove it helped on held-out poses.
+"""
+The residual loop: find what the model lacks, add it, and prove it helped on held-out poses.
 
 1. Fit the paper's 15 parameters on the training poses; hold the rest out.
 2. Test the residuals: their chi-square against the propagated noise (size), and, for every
@@ -8,9 +9,9 @@
 3. Take the most significant candidate (Bonferroni over the candidates left), keeping only its
    parameters that are identifiable together with the rest (their projected columns must not
    vanish: H_i beside h_i does), and refit.
-4. Keep it only if the fit improves significantly (likelihood ratio, chi2(q)) and the held-out poses
-   do too (one-sided paired t-test of their per-pose chi-square contributions, before against after);
-   repeat until no candidate is significant.
+4. Keep it only if the fit improves significantly (likelihood ratio, chi2(q)) and the held-out
+   poses do too (one-sided paired t-test of their per-pose chi-square contributions, before against
+   after); repeat until no candidate is significant.
 5. If the residuals are still too large, a generic fallback tests their correlation with what could
    explain them (joint angle, motion direction, gravity torque, image position, time) and flags it.
 
@@ -20,13 +21,13 @@ candidates compete), so on data with no effect the loop claims one in about ALPH
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
-
 from robotenis_kinematics import delta, effects
 from robotenis_kinematics import identification as idf
+from scipy import stats
 
 ALPHA = 0.01
-CANDIDATES = ('joint_scale', 'base_geometry', 'hand_eye_rotation', 'backlash', 'gravity_compliance')
+CANDIDATES = ('joint_scale', 'base_geometry', 'hand_eye_rotation', 'backlash',
+              'gravity_compliance')
 FEATURES = ('joint angle', 'joint angle squared', 'motion direction', 'gravity torque', 'range',
             'image x', 'image y', 'time')
 
@@ -48,7 +49,8 @@ class CandidateTest:
     statistic: float
     dof: int
     p_value: float
-    z: float                 # Wilson-Hilferty normal score of the statistic: ranks candidates where p underflows
+    # Wilson-Hilferty normal score of the statistic: ranks candidates where p underflows.
+    z: float
 
 
 @dataclass
@@ -82,7 +84,7 @@ class Diagnosis:
 
 
 def with_candidate(model, name):
-    """The model with a candidate's parameters present at zero effect."""
+    """Return the model with a candidate's parameters present at zero effect."""
     if name in effects.PARAMETERS and name not in model.effects:
         return idf.Model(model.desc, model.P0, {**model.effects, name: np.zeros(3)})
     return model
@@ -98,7 +100,8 @@ def score_test(result, meas, name, rtol=1e-6):
     Jc = J_w[:, p:]
     perp = Jc - Q @ (Q.T @ Jc)
     keep, basis = [], np.zeros((len(r_w), 0))
-    for j, n in enumerate(proposed):  # Gram-Schmidt in order: a column that adds nothing is dropped
+    # Gram-Schmidt in order: a column that adds nothing is dropped.
+    for j, n in enumerate(proposed):
         v = perp[:, j] - basis @ (basis.T @ perp[:, j])
         if np.linalg.norm(v) > rtol * np.linalg.norm(Jc[:, j]):
             keep.append(n)
@@ -108,11 +111,16 @@ def score_test(result, meas, name, rtol=1e-6):
     q = len(keep)
     if not q:
         return CandidateTest(name, (), dropped, 0.0, 0, 1.0, -np.inf)
-    return CandidateTest(name, tuple(keep), dropped, stat, q, float(stats.chi2.sf(stat, q)), wilson_hilferty(stat, q))
+    return CandidateTest(name, tuple(keep), dropped, stat, q, float(stats.chi2.sf(stat, q)),
+                         wilson_hilferty(stat, q))
 
 
 def wilson_hilferty(x, k):
-    """Normal score of a chi2(k) value x: ((x/k)^(1/3) - 1 + 2/(9k)) / sqrt(2/(9k)); monotone in p."""
+    """
+    Return the normal score of a chi2(k) value x; monotone in p.
+
+    z = ((x/k)^(1/3) - 1 + 2/(9k)) / sqrt(2/(9k)).
+    """
     return float(((x / k) ** (1 / 3) - 1 + 2 / (9 * k)) / np.sqrt(2 / (9 * k)))
 
 
@@ -123,11 +131,16 @@ def pose_chi2(model, meas):
 
 
 def position_errors(model, meas):
-    """3D distance (K,) between where the model puts the effector (FK of its arm angles) and where
-    the camera saw it (P0 + Pi_k), m."""
+    """
+    Return the 3D distance (K,), m, between the effector positions of the model and the camera.
+
+    That is, between where the model puts the effector (FK of its arm angles) and where the camera
+    saw it (P0 + Pi_k).
+    """
     Pi = effects.rotate_increments(model.effects, meas.Pi)
     P_seen = model.P0 + Pi
-    theta, _ = effects.model_joint_angles(model.desc, model.effects, meas.Theta, meas.direction, P_seen)
+    theta, _ = effects.model_joint_angles(model.desc, model.effects, meas.Theta, meas.direction,
+                                          P_seen)
     return np.linalg.norm(delta.forward(model.desc, theta) - P_seen, axis=1)
 
 
@@ -153,7 +166,7 @@ def correlations(model, meas, features):
 
 
 def residual_features(model, meas, sphere, stamps):
-    """What a residual may correlate with, per pose (and per joint where it applies)."""
+    """Return what a residual may correlate with, per pose (and per joint where it applies)."""
     theta = model.desc.theta0 + meas.Theta
     P = model.P0 + meas.Pi
     return {
@@ -169,13 +182,26 @@ def residual_features(model, meas, sphere, stamps):
 
 
 def run(declared, meas, sphere, stamps, holdout_fraction=0.3, seed=0, alpha=ALPHA, progress=None):
-    """The residual loop on one session (see the module docstring).
+    """
+    Run the residual loop on one session (see the module docstring).
 
     Parameters
     ----------
-    declared : RobotDescription the session ran with (the nominal start).
-    meas : Measurements of all rests, in visit order (Session.measurements()).
-    sphere, stamps : (K, 3) camera-frame sphere centres and (K,) rest times, for the fallback.
+    declared : RobotDescription
+        The description the session ran with (the nominal start).
+    meas : Measurements
+        All rests, in visit order (Session.measurements()).
+    sphere, stamps : numpy.ndarray
+        (K, 3) camera-frame sphere centres and (K,) rest times, for the fallback.
+    holdout_fraction : float
+        Share of the rests held out.
+    seed : int
+        Seed of the random train / held-out split.
+    alpha : float
+        Significance level of the tests.
+    progress : callable or None
+        Called with a line of text as the loop goes.
+
     """
     rng = np.random.default_rng(seed)
     train, hold = split(len(meas), holdout_fraction, rng)
@@ -197,7 +223,8 @@ def run(declared, meas, sphere, stamps, holdout_fraction=0.3, seed=0, alpha=ALPH
             step.reason = f'no candidate significant (smallest p = {best.p_value:.3g})'
             break
         say(f'adding {best.name} ({", ".join(best.parameters)})')
-        trial = idf.identify(with_candidate(current.model, best.name), m_train, current.names + best.parameters)
+        trial = idf.identify(with_candidate(current.model, best.name), m_train,
+                             current.names + best.parameters)
         step.chi2_after = trial.chi2
         step.lr_p_value = float(stats.chi2.sf(current.chi2 - trial.chi2, best.dof))
         before, after = pose_chi2(current.model, m_hold), pose_chi2(trial.model, m_hold)
@@ -210,7 +237,8 @@ def run(declared, meas, sphere, stamps, holdout_fraction=0.3, seed=0, alpha=ALPH
         else:
             step.reason = 'rejected: no significant improvement ' + \
                 ('on the held-out poses' if step.lr_p_value < alpha else 'of the fit')
-    size = {'chi2': current.chi2, 'dof': current.dof, 'p_value': float(stats.chi2.sf(current.chi2, current.dof)),
+    size = {'chi2': current.chi2, 'dof': current.dof,
+            'p_value': float(stats.chi2.sf(current.chi2, current.dof)),
             'plain_chi2': plain.chi2, 'plain_p_value': float(stats.chi2.sf(plain.chi2, plain.dof))}
     fallback = []
     if size['p_value'] < alpha:
@@ -221,4 +249,5 @@ def run(declared, meas, sphere, stamps, holdout_fraction=0.3, seed=0, alpha=ALPH
               for name, r in (('nominal', nominal), ('plain', plain), ('final', current))}
     holdout_chi2 = {name: float(np.sum(pose_chi2(r.model, m_hold)))
                     for name, r in (('nominal', nominal), ('plain', plain), ('final', current))}
-    return Diagnosis(plain, current, found, steps, train, hold, size, errors, holdout_chi2, fallback)
+    return Diagnosis(plain, current, found, steps, train, hold, size, errors, holdout_chi2,
+                     fallback)

@@ -1,15 +1,16 @@
-"""Choosing calibration poses the hand camera can measure.
+"""
+Choosing calibration poses the hand camera can measure.
 
-The planner knows only what a real system knows: the declared description and a rough guess of where
-the ball is (base frame, a few cm). It predicts the ball in the camera with the declared camera
-rotation and no camera offset, so it keeps wide margins; rests that still miss the ball are skipped.
-Once a few rests are measured, ``refined_guess`` puts the ball where they saw it, and the session
-plans the rest of its poses with that (SessionRunner's ``replan``).
+The planner knows only what a real system knows: the declared description and a rough guess of
+where the ball is (base frame, a few cm). It predicts the ball in the camera with the declared
+camera rotation and no camera offset, so it keeps wide margins; rests that still miss the ball are
+skipped. Once a few rests are measured, ``refined_guess`` puts the ball where they saw it, and the
+session plans the rest of its poses with that (SessionRunner's ``replan``).
 
 * ``boundary``: the paper's way -- random poses 5-10 cm from a singularity (section 5.1).
-* ``optimal``: a D-optimal design: from visible candidates, greedily add the pose that most increases
-  log det of the information matrix J_w^T J_w of the 15 parameters (the observability index that
-  shrinks the volume of the confidence ellipsoid), starting from a few random poses.
+* ``optimal``: a D-optimal design: from visible candidates, greedily add the pose that most
+  increases log det of the information matrix J_w^T J_w of the 15 parameters (the observability
+  index that shrinks the volume of the confidence ellipsoid), starting from a few random poses.
 """
 import numpy as np
 
@@ -17,7 +18,7 @@ from robotenis_kinematics import delta, effects, synthetic, workspace
 from robotenis_kinematics import identification as idf
 
 PLAN_RANGE = (0.20, 0.55)      # m along the optical axis: inside the detector's 0.15-0.60
-PLAN_HALF_FIELD = (0.45, 0.33)  # tan of the usable half field of view, x and y (640x480, f = 500 px)
+PLAN_HALF_FIELD = (0.45, 0.33)  # tan of the usable half field of view, x, y (640x480, f = 500 px)
 SELECTIONS = ('boundary', 'optimal')
 
 
@@ -27,10 +28,14 @@ def predicted_sphere(declared, sphere_guess, P):
 
 
 def refined_guess(declared, Theta, sphere):
-    """The ball guess (base frame, m, as ``predicted_sphere`` takes it) from measured rests: the median
-    over rests of P_k + R s_k, with P_k the declared model's effector for the readings Theta (K, 3,
-    increments, in visit order) and s_k the ball seen (K, 3, optical frame). Good to the declared
-    model's error (about a millimetre) plus the camera offset the planner ignores anyway."""
+    """
+    Return the ball guess (base frame, m, as ``predicted_sphere`` takes it) from measured rests.
+
+    The guess is the median over rests of P_k + R s_k, with P_k the declared model's effector for
+    the readings Theta (K, 3, increments, in visit order) and s_k the ball seen (K, 3, optical
+    frame). Good to the declared model's error (about a millimetre) plus the camera offset the
+    planner ignores anyway.
+    """
     P = delta.forward(declared, effects.joint_angles(declared, Theta))
     return np.median(P + np.asarray(sphere, dtype=float) @ declared.camera_rotation.T, axis=0)
 
@@ -43,7 +48,7 @@ def plannable(declared, sphere_guess, P):
 
 
 def visible_candidates(declared, sphere_guess, n, rng, band=None, batch=20000, max_batches=200):
-    """``n`` random workspace positions (n, 3) the camera should see; ValueError if too few exist."""
+    """Draw ``n`` random workspace positions (n, 3) the camera should see, else ValueError."""
     out, count = [], 0
     for _ in range(max_batches):
         P = workspace.sample(declared, batch, rng, band=band)
@@ -53,16 +58,16 @@ def visible_candidates(declared, sphere_guess, n, rng, band=None, batch=20000, m
         if count >= n:
             return np.concatenate(out)[:n]
     raise ValueError(f'only {count} plannable poses found near the ball guess {sphere_guess}: '
-                     'move the ball into the camera\'s reach')
+                     "move the ball into the camera's reach")
 
 
 def boundary(declared, sphere_guess, n, rng):
-    """The paper's poses: random, visible, 5-10 cm from a singularity."""
+    """Select the paper's poses: random, visible, 5-10 cm from a singularity."""
     return visible_candidates(declared, sphere_guess, n, rng, band=(0.05, 0.10))
 
 
 def optimal(declared, sphere_guess, n, rng, pool_size=3000, seed_poses=20):
-    """D-optimal poses (greedy log det of the 15-parameter information matrix), visit order random."""
+    """Pick D-optimal poses (greedy log det of the 15-parameter information matrix), shuffled."""
     pool = visible_candidates(declared, sphere_guess, pool_size, rng)
     meas = synthetic.measure(declared, pool)
     model = synthetic.true_model(declared)
@@ -85,7 +90,7 @@ def optimal(declared, sphere_guess, n, rng, pool_size=3000, seed_poses=20):
 
 
 def select(method, declared, sphere_guess, n, rng):
-    """Poses by name ('boundary' or 'optimal')."""
+    """Select poses by name ('boundary' or 'optimal')."""
     if method not in SELECTIONS:
         raise ValueError(f"unknown pose selection {method!r} (known: {', '.join(SELECTIONS)})")
     return (boundary if method == 'boundary' else optimal)(declared, sphere_guess, n, rng)

@@ -1,13 +1,14 @@
-"""`./robotenis replay BAG_DIR [--rate R] [--delay S]`: publish a recorded session with its original timing.
+"""
+`./robotenis replay BAG_DIR [--rate R] [--delay S]`: publish a recorded session, timed as recorded.
 
-Every topic of the bag whose message type is installed is published as the stored CDR bytes (so the
-messages keep their header stamps) by a publisher of that type, at the recorded times divided by
-``rate``, after ``delay`` seconds for the subscribers to discover the publishers. QoS:
-/robot_description latched (transient local, depth 1), images (sensor_msgs Image and CompressedImage)
-the sensor-data profile, every other topic reliable with depth 100. A truncated bag is replayed as far
-as it is whole (in file order). The topics are published under their names relative to
-``--namespace`` (default the root: the bag's own names). Progress goes to stderr; Ctrl-C stops
-cleanly.
+Every topic of the bag whose message type is installed is published as the stored CDR bytes (so
+the messages keep their header stamps) by a publisher of that type, at the recorded times divided
+by ``rate``, after ``delay`` seconds for the subscribers to discover the publishers. QoS:
+/robot_description latched (transient local, depth 1), images (sensor_msgs Image and
+CompressedImage) the sensor-data profile, every other topic reliable with depth 100. A truncated
+bag is replayed as far as it is whole (in file order). The topics are published under their names
+relative to ``--namespace`` (default the root: the bag's own names). Progress goes to stderr;
+Ctrl-C stops cleanly.
 """
 import argparse
 import importlib
@@ -17,7 +18,7 @@ import time
 import rclpy
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile, ReliabilityPolicy
 
 from robotenis_calibration import bag_io
 
@@ -27,7 +28,7 @@ ACK_TIMEOUT = Duration(seconds=5)   # for reliable subscribers to receive the la
 
 
 def message_class(type_name):
-    """The installed Python class of a ROS type name ('pkg/msg/Type'), or None if not installed."""
+    """Import the Python class of a ROS type name ('pkg/msg/Type'); None if it is not installed."""
     package, kind, name = type_name.split('/')
     try:
         return getattr(importlib.import_module(f'{package}.{kind}'), name)
@@ -36,7 +37,7 @@ def message_class(type_name):
 
 
 def qos_for(topic, type_name):
-    """QoS profile of a replayed topic (see the module docstring)."""
+    """Return the QoS profile of a replayed topic (see the module docstring)."""
     if topic.lstrip('/') in LATCHED:
         return QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
     if type_name in IMAGE_TYPES:
@@ -45,15 +46,17 @@ def qos_for(topic, type_name):
 
 
 def create_publishers(node, topics):
-    """{topic: publisher} for the topics whose type is installed; the others are named on stderr."""
+    """Create {topic: publisher} for the topics of installed types; others are named on stderr."""
     publishers = {}
     for topic, type_name in sorted(topics.items()):
         cls = message_class(type_name)
         if cls is None:
-            print(f'[replay] {topic}: type {type_name} is not installed, not replayed', file=sys.stderr)
+            print(f'[replay] {topic}: type {type_name} is not installed, not replayed',
+                  file=sys.stderr)
             continue
         # relative: the bag's topics are the calibration contract's, published in --namespace
-        publishers[topic] = node.create_publisher(cls, topic.lstrip('/'), qos_for(topic, type_name))
+        publishers[topic] = node.create_publisher(cls, topic.lstrip('/'),
+                                                  qos_for(topic, type_name))
     return publishers
 
 
@@ -64,7 +67,7 @@ def wait(executor, until):
 
 
 def play(reader, publishers, executor, rate):
-    """Publish the bag's messages at their recorded times / rate; progress on stderr about every second."""
+    """Publish the bag's messages at recorded times / rate; progress on stderr about every 1 s."""
     total = sum(reader.counts[t] for t in publishers)
     start, first, shown = time.monotonic(), None, 0.0
     for done, record in enumerate(reader.records(publishers), start=1):
@@ -73,8 +76,8 @@ def play(reader, publishers, executor, rate):
         publishers[record.topic].publish(record.data)
         if time.monotonic() - shown >= 1.0 or done == total:
             shown = time.monotonic()
-            print(f'\r[replay] {(record.log_ns - first) * 1e-9:8.1f} s of the bag, {done} of {total} messages',
-                  end='', file=sys.stderr, flush=True)
+            print(f'\r[replay] {(record.log_ns - first) * 1e-9:8.1f} s of the bag,'
+                  f' {done} of {total} messages', end='', file=sys.stderr, flush=True)
     print(file=sys.stderr)
 
 
@@ -82,8 +85,10 @@ def main(argv=None):
     parser = argparse.ArgumentParser(prog='robotenis replay', description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('bag_dir', help='a rosbag2 bag directory')
-    parser.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1: recorded timing)')
-    parser.add_argument('--delay', type=float, default=1.0, help='s to wait before the first message (default 1)')
+    parser.add_argument('--rate', type=float, default=1.0,
+                        help='speed factor (default 1: recorded timing)')
+    parser.add_argument('--delay', type=float, default=1.0,
+                        help='s to wait before the first message (default 1)')
     parser.add_argument('--namespace', default='', help='publish the topics in this namespace')
     args = parser.parse_args(argv)
     if not args.rate > 0:

@@ -1,49 +1,52 @@
-"""From a recorded calibration session (any rosbag2 bag) to a Session: one averaged measurement per rest.
+"""
+From a recorded calibration session (any rosbag2 bag) to a Session.
+
+A Session holds one averaged measurement per rest.
 
 Topics (a missing one is a ValueError naming it); times are the messages' header stamps:
 
-* /robot_description (std_msgs/String): the declared robot description YAML (the first one is used);
+* /robot_description (std_msgs/String): the declared robot description YAML (the first one is
+  used);
 * /joint_states (sensor_msgs/JointState): positions of motor_1..3, names in any order: resolver
   increments from home, rad;
 * /sphere/position (geometry_msgs/PointStamped): the sphere centre in the camera optical frame, m;
 * /calibration/rest (robotenis_interfaces/RestMarker), optional: start and end of each measurement.
 
-Rests. With markers, a rest is the time between a pose's start and end markers (the session waited for
-the robot to settle before the start marker). Without them, rests are found from the joint states: the
-robot is still where, on every joint, the mean reading over half a window (m samples, ``window`` / 2)
-and the mean over the next half window differ by at most
+Rests. With markers, a rest is the time between a pose's start and end markers (the session waited
+for the robot to settle before the start marker). Without them, rests are found from the joint
+states: the robot is still where, on every joint, the mean reading over half a window (m samples,
+``window`` / 2) and the mean over the next half window differ by at most
 
     delta = k sqrt(2 / m) sigma + q,
 
 k standard deviations of that difference under noise alone (sigma: the readings' noise, from the
-median absolute difference of consecutive readings, i.e. mostly from the rests) plus one count q of the
-resolvers (the smallest step between two readings), which a reading sitting on a count boundary may flip
-without moving: a speed threshold of delta / (m dt). A still period is a rest if it lasts at least
-``min_duration``; its first ``settle`` seconds are skipped (vibrations of the robot and of the ball's
-holder that the joints do not show).
+median absolute difference of consecutive readings, i.e. mostly from the rests) plus one count q of
+the resolvers (the smallest step between two readings), which a reading sitting on a count boundary
+may flip without moving: a speed threshold of delta / (m dt). A still period is a rest if it lasts
+at least ``min_duration``; its first ``settle`` seconds are skipped (vibrations of the robot and of
+the ball's holder that the joints do not show).
 
 Averaging, per rest and over the same window for both sensors: non-finite samples are dropped, then
 ``robust_mean`` rejects outliers (false detections): a median/MAD start, then a chi-square gate at
-level ``alpha`` against the spread, iterated with the mean and covariance of the other samples
-kept (leave one out: the gate is exact for Gaussian samples, however few). The
-covariance of the mean is S / n * (n - 1) / (n - p - 2), S the covariance of one sample: its inverse is
-then an unbiased estimate of the mean's precision (the mean of an inverse Wishart), so chi-square
-statistics keep their expectation even with few frames per rest. Readings use per-joint variances
-(p = 1) with a floor of q^2 / 12 per sample (a joint whose readings never change still has the
-quantisation spread). Samples are taken as independent: camera frames are; resolver noise at rest is
-white in the simulator. A rest with fewer than ``min_samples`` good camera frames or readings is
-skipped with a note.
+level ``alpha`` against the spread, iterated with the mean and covariance of the other samples kept
+(leave one out: the gate is exact for Gaussian samples, however few). The covariance of the mean is
+S / n * (n - 1) / (n - p - 2), S the covariance of one sample: its inverse is then an unbiased
+estimate of the mean's precision (the mean of an inverse Wishart), so chi-square statistics keep
+their expectation even with few frames per rest. Readings use per-joint variances (p = 1) with a
+floor of q^2 / 12 per sample (a joint whose readings never change still has the quantisation
+spread). Samples are taken as independent: camera frames are; resolver noise at rest is white in
+the simulator. A rest with fewer than ``min_samples`` good camera frames or readings is skipped
+with a note.
 """
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
-
 from robotenis_calibration import bag_io
 from robotenis_calibration.session import Session
 from robotenis_kinematics import description
 from robotenis_ros.convert import joint_vector
 from robotenis_ros.names import JOINTS
+from scipy import stats
 
 REQUIRED = {
     '/robot_description': 'std_msgs/msg/String',
@@ -53,7 +56,8 @@ REQUIRED = {
 MARKERS = ('/calibration/rest', 'robotenis_interfaces/msg/RestMarker')
 MAX_PASSES = 50       # of the outlier gate; it settles in a few
 START_ALPHA = 1e-6    # the first, robust gate (median and MAD) only takes out gross outliers
-SPHERE_FLOOR = 1e-9    # m: floor on a frame's standard deviation, far below any detector's; keeps the gate defined
+# m: floor on a frame's standard deviation, far below any detector's; keeps the gate defined
+SPHERE_FLOOR = 1e-9
 
 
 @dataclass(frozen=True)
@@ -70,8 +74,12 @@ class RestParameters:
 
 @dataclass
 class Recording:
-    """The time series of a bag: stamps in s, readings (n, 3) rad, sphere centres (m, 3) m,
-    markers [(stamp, pose index, start)]."""
+    """
+    The time series of a bag.
+
+    Stamps in s, readings (n, 3) rad, sphere centres (m, 3) m, markers
+    [(stamp, pose index, start)].
+    """
 
     description: object
     t_joint: np.ndarray
@@ -82,12 +90,13 @@ class Recording:
 
 
 def check_topics(reader):
-    """ValueError naming a required topic that is missing, of another type, or empty."""
+    """Raise ValueError naming a required topic that is missing, of another type, or empty."""
     why = f' ({"; ".join(reader.notes)})' if reader.notes else ''
     for topic, type_name in REQUIRED.items():
         if topic not in reader.topics:
             have = ', '.join(sorted(reader.topics)) or 'none'
-            raise ValueError(f'{reader.path}: the bag has no {topic} topic ({type_name}); its topics: {have}{why}')
+            raise ValueError(f'{reader.path}: the bag has no {topic} topic ({type_name});'
+                             f' its topics: {have}{why}')
         if reader.topics[topic] != type_name:
             raise ValueError(f'{topic}: expected {type_name}, the bag has {reader.topics[topic]}')
         if reader.counts[topic] == 0:
@@ -95,11 +104,12 @@ def check_topics(reader):
 
 
 def read(reader, notes, progress=None):
-    """The Recording of an open BagReader (time order); odd messages are counted in ``notes``."""
+    """Read the Recording of an open BagReader (time order), counting odd messages in ``notes``."""
     check_topics(reader)
     topics = list(REQUIRED) + ([MARKERS[0]] if reader.topics.get(MARKERS[0]) == MARKERS[1] else [])
     text, joints, spheres, markers, unnamed = None, [], [], [], 0
-    report = (lambda done, total: progress(f'read {done} of {total} messages')) if progress else None
+    report = ((lambda done, total: progress(f'read {done} of {total} messages')) if progress
+              else None)
     for topic, _, stamp, msg in reader.messages(topics, report, steps=10):
         t = stamp * 1e-9
         if topic == '/joint_states':
@@ -115,7 +125,8 @@ def read(reader, notes, progress=None):
         elif text is None:          # /robot_description: the first one
             text = msg.data
     if unnamed:
-        notes.append(f'{unnamed} /joint_states messages without positions of {", ".join(JOINTS)} ignored')
+        notes.append(f'{unnamed} /joint_states messages without positions of'
+                     f' {", ".join(JOINTS)} ignored')
     try:
         declared = description.loads(text)
     except ValueError as e:
@@ -125,7 +136,8 @@ def read(reader, notes, progress=None):
     if not finite.any():
         raise ValueError(f'/joint_states: no message has finite positions of {", ".join(JOINTS)}')
     if not finite.all():
-        notes.append(f'{int((~finite).sum())} /joint_states readings with NaN or infinite values dropped')
+        notes.append(f'{int((~finite).sum())} /joint_states readings with NaN or infinite values'
+                     ' dropped')
     J = J[finite]
     S = _sorted(np.array(spheres, dtype=float).reshape(-1, 4))
     return Recording(declared, J[:, 0], J[:, 1:], S[:, 0], S[:, 1:], sorted(markers))
@@ -149,17 +161,21 @@ def marked_windows(markers, notes):
 
 
 def resolver_noise(Theta):
-    """Noise standard deviation (3,) and count size q (3,) of the readings (see the module docstring);
-    steps below the readings' float resolution are rounding, not counts."""
+    """
+    Return the noise standard deviation (3,) and count size q (3,) of the readings.
+
+    See the module docstring; steps below the readings' float resolution are rounding, not counts.
+    """
     d = np.diff(Theta, axis=0)
     sigma = 1.4826 * np.median(np.abs(d - np.median(d, axis=0)), axis=0) / np.sqrt(2)
     resolution = 4 * np.finfo(float).eps * np.max(np.abs(Theta), axis=0)
-    q = np.array([np.min(np.abs(col[np.abs(col) > r]), initial=np.inf) for col, r in zip(d.T, resolution)])
+    q = np.array([np.min(np.abs(col[np.abs(col) > r]), initial=np.inf)
+                  for col, r in zip(d.T, resolution)])
     return sigma, np.where(np.isfinite(q), q, 0.0)
 
 
 def still_periods(t, Theta, params=RestParameters()):
-    """(start, end) times of the periods where every joint stays still for at least min_duration."""
+    """(start, end) times of the periods where all joints stay still for at least min_duration."""
     dt = np.median(np.diff(t)) if len(t) > 1 else np.inf
     m = max(2, int(round(params.window / 2 / dt))) if np.isfinite(dt) and dt > 0 else 2
     if len(t) < 2 * m + 1:
@@ -169,9 +185,11 @@ def still_periods(t, Theta, params=RestParameters()):
     difference = (c[i + m] - 2 * c[i] + c[i - m]) / m
     sigma, q = resolver_noise(Theta)
     rounding = 8 * np.finfo(float).eps * np.max(np.abs(c), axis=0) / m   # of the cumulative sums
-    still = np.all(np.abs(difference) <= params.k * np.sqrt(2.0 / m) * sigma + q + rounding, axis=1)
+    threshold = params.k * np.sqrt(2.0 / m) * sigma + q + rounding
+    still = np.all(np.abs(difference) <= threshold, axis=1)
     edges = np.diff(np.concatenate([[0], still.astype(int), [0]]))
-    periods = [(t[i[a]], t[i[b - 1]]) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    periods = [(t[i[a]], t[i[b - 1]]) for a, b in zip(starts, ends)]
     return [(a, b) for a, b in periods if b - a >= params.min_duration]
 
 
@@ -187,11 +205,11 @@ def robust_mean(x, floor, alpha):
     Return the mean (p,), covariance of one sample (p, p) and mask of samples kept, outliers out.
 
     Start from the median and the MAD (scaled to a standard deviation), gated at the chi2(p)
-    quantile 1 - START_ALPHA (gross outliers only); then, until the kept set does not change, test every sample against the
-    mean and covariance of the other kept samples (``loo_gate``: exact for Gaussian samples, so a
-    good sample is rejected with probability alpha whatever their number). The covariance is
-    divided by the share of a Gaussian's variance such a gate keeps (P(chi2(p+2) <= g) /
-    P(chi2(p) <= g)); ``floor`` (p,) bounds each variance from below.
+    quantile 1 - START_ALPHA (gross outliers only); then, until the kept set does not change, test
+    every sample against the mean and covariance of the other kept samples (``loo_gate``: exact for
+    Gaussian samples, so a good sample is rejected with probability alpha whatever their number).
+    The covariance is divided by the share of a Gaussian's variance such a gate keeps
+    (P(chi2(p+2) <= g) / P(chi2(p) <= g)); ``floor`` (p,) bounds each variance from below.
     """
     p = x.shape[1]
     gate = stats.chi2.ppf(1 - alpha, p)
@@ -237,13 +255,18 @@ def unbiased_precision_factor(n, p):
     return (n - 1) / (n - p - 2)
 
 
-MOVED = 2e-4   # rad: a joint this far from its rest value was moving toward it (5 counts and the noise)
+# rad: a joint this far from its rest value was moving toward it (5 counts and the noise)
+MOVED = 2e-4
 
 
 def approach_direction(t_joint, Theta, t0, rest, previous):
-    """Sign of each joint's motion into a rest starting at t0 with mean readings ``rest`` (3,): from the
-    last reading before t0 farther than MOVED from it; a joint that did not move keeps ``previous``.
-    The joint states show the motion through every pose visited, measured or not."""
+    """
+    Return the sign of each joint's motion into the rest that starts at t0.
+
+    With mean readings ``rest`` (3,): from the last reading before t0 farther than MOVED from it; a
+    joint that did not move keeps ``previous``. The joint states show the motion through every pose
+    visited, measured or not.
+    """
     before = Theta[:np.searchsorted(t_joint, t0)]
     out = np.array(previous, dtype=float)
     for j in range(3):
@@ -254,12 +277,14 @@ def approach_direction(t_joint, Theta, t0, rest, previous):
 
 
 def average(rec, windows, params, notes):
-    """The Session of the rests in ``windows`` (see the module docstring); skipped rests go to notes."""
+    """Average the rests in ``windows`` into a Session (module docstring); skips go to notes."""
     _, q = resolver_noise(rec.Theta)
     rows, rejected, total, direction = [], 0, 0, np.ones(3)
     for t0, t1, label in windows:
-        sphere = rec.sphere[np.searchsorted(rec.t_sphere, t0):np.searchsorted(rec.t_sphere, t1, side='right')]
-        Theta = rec.Theta[np.searchsorted(rec.t_joint, t0):np.searchsorted(rec.t_joint, t1, side='right')]
+        s0, s1 = np.searchsorted(rec.t_sphere, t0), np.searchsorted(rec.t_sphere, t1, side='right')
+        j0, j1 = np.searchsorted(rec.t_joint, t0), np.searchsorted(rec.t_joint, t1, side='right')
+        sphere = rec.sphere[s0:s1]
+        Theta = rec.Theta[j0:j1]
         sphere = sphere[np.all(np.isfinite(sphere), axis=1)]
         if min(len(sphere), len(Theta)) < params.min_samples:
             notes.append(f'{label}: only {len(sphere)} camera frames and {len(Theta)} readings '
@@ -298,6 +323,7 @@ def load_session(bag_dir, params=RestParameters(), progress=None):
         notes.append(f'{len(windows)} rests between /calibration/rest markers')
     else:
         windows = found_windows(rec, params)
-        notes.append(f'no /calibration/rest markers: {len(windows)} rests found from the joint states '
-                     f'(still for at least {params.min_duration} s; the first {params.settle} s of each skipped)')
+        notes.append(f'no /calibration/rest markers: {len(windows)} rests found from the joint'
+                     f' states (still for at least {params.min_duration} s; the first'
+                     f' {params.settle} s of each skipped)')
     return average(rec, windows, params, notes), notes

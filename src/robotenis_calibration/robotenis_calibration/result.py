@@ -1,8 +1,9 @@
-"""RESULT.yaml: the calibrated robot description, the effects found, and the report.
+"""
+RESULT.yaml: the calibrated robot description, the effects found, and the report.
 
-Same schema as every robot description (robotenis_kinematics.description), plus ``effects`` (each
-with its parameters and their standard deviations) and ``report`` (the residual loop's numbers), so
-``./robotenis fk --model RESULT.yaml`` and the motion controller can use it directly.
+Same schema as every robot description (robotenis_kinematics.description), plus ``effects``
+(each with its parameters and their standard deviations) and ``report`` (the residual loop's
+numbers), so ``./robotenis fk --model RESULT.yaml`` and the motion controller can use it directly.
 """
 import numpy as np
 
@@ -17,11 +18,12 @@ def _std(result, name):
 
 
 def calibrated_description(diagnosis, declared):
-    """The declared description with the final model's geometry, camera rotation and effects."""
+    """Return the declared description with the final geometry, camera rotation and effects."""
     final = diagnosis.final
     desc = final.model.desc.copy(effects=[], report={})
     if 'hand_eye_rotation' in final.model.effects:
-        desc.camera_rotation = fx.rotation_vector_matrix(final.model.effects['hand_eye_rotation']) @ declared.camera_rotation
+        turn = fx.rotation_vector_matrix(final.model.effects['hand_eye_rotation'])
+        desc.camera_rotation = turn @ declared.camera_rotation
     for name in diagnosis.effects:
         entry = {'name': name}
         if name == 'base_geometry':
@@ -49,12 +51,13 @@ def _parameters(result):
 
 
 def report(diagnosis):
-    """The numbers of the residual loop as plain data (SI units; errors in mm as named)."""
+    """Return the numbers of the residual loop as plain data (SI units; errors in mm as named)."""
     steps = []
     for step in diagnosis.steps:
         steps.append({
-            'candidates': [{'name': t.name, 'statistic': t.statistic, 'dof': t.dof, 'p_value': t.p_value,
-                            'parameters': list(t.parameters), 'unidentifiable': list(t.dropped)}
+            'candidates': [{'name': t.name, 'statistic': t.statistic, 'dof': t.dof,
+                            'p_value': t.p_value, 'parameters': list(t.parameters),
+                            'unidentifiable': list(t.dropped)}
                            for t in step.tests],
             'chosen': step.chosen, 'kept': step.kept, 'reason': step.reason,
             'chi2_before': step.chi2_before, 'chi2_after': step.chi2_after,
@@ -76,24 +79,28 @@ def report(diagnosis):
 
 
 def summary(diagnosis):
-    """Lines for a human: before/after errors, effects, flags."""
+    """Return lines for a human: before/after errors, effects, flags."""
     e = diagnosis.errors_mm
-    lines = [f"held-out RMS error: nominal {e['nominal']:.3f} mm, plain 15-parameter {e['plain']:.3f} mm, "
+    lines = [f"held-out RMS error: nominal {e['nominal']:.3f} mm,"
+             f" plain 15-parameter {e['plain']:.3f} mm, "
              f"final {e['final']:.3f} mm ({len(diagnosis.holdout)} held-out poses)",
              f"effects found: {', '.join(diagnosis.effects) or 'none'}"]
     for step in diagnosis.steps:
-        tests = ', '.join(f'{t.name} {t.statistic:.1f}/{t.dof} (p={t.p_value:.2g})' for t in step.tests)
-        lines.append(f"  score tests: {tests}")
-        lines.append(f"    -> {step.chosen}: {step.reason}")
+        tests = ', '.join(f'{t.name} {t.statistic:.1f}/{t.dof} (p={t.p_value:.2g})'
+                          for t in step.tests)
+        lines.append(f'  score tests: {tests}')
+        lines.append(f'    -> {step.chosen}: {step.reason}')
     size = diagnosis.size_test
-    lines.append(f"residual size: chi2 {size['chi2']:.1f} for {size['dof']} dof (p = {size['p_value']:.3g})")
+    lines.append(f"residual size: chi2 {size['chi2']:.1f} for {size['dof']} dof"
+                 f" (p = {size['p_value']:.3g})")
     for f, j, r, p in diagnosis.fallback:
-        lines.append(f"  UNEXPLAINED: joint {j} residual correlates with {f} (r = {r:.2f}, p = {p:.2g})")
+        lines.append(f'  UNEXPLAINED: joint {j} residual correlates with {f}'
+                     f' (r = {r:.2f}, p = {p:.2g})')
     return lines
 
 
 def plot_residuals(diagnosis, meas, sphere, stamps, path):
-    """PNG of the final model's whitened residuals against what they could correlate with."""
+    """Plot the final model's whitened residuals against what they could correlate with (PNG)."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
@@ -115,7 +122,8 @@ def plot_residuals(diagnosis, meas, sphere, stamps, path):
             if col == 0:
                 ax.set_ylabel(f'{label}\nwhitened residual')
     axes[0, 0].legend(fontsize=7)
-    fig.suptitle('Residuals against what they may correlate with (whitened: unit variance if the model is right)')
+    fig.suptitle('Residuals against what they may correlate with'
+                 ' (whitened: unit variance if the model is right)')
     fig.tight_layout()
     fig.savefig(path, dpi=80)
     plt.close(fig)

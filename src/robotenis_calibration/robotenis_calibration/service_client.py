@@ -18,15 +18,17 @@ def progress_bar(fraction, text, width=40):
 
 
 def request_from(args):
-    """The Calibrate request of the command line (0 or empty: the service's defaults)."""
-    return Calibrate.Request(num_poses=args.poses, frames_per_pose=args.frames, settle_time=float(args.settle or 0.0),
-                             seed=args.seed, pose_selection=args.selection, bag_path=args.bag)
+    """Build the Calibrate request of the command line (0 or empty: the service's defaults)."""
+    return Calibrate.Request(num_poses=args.poses, frames_per_pose=args.frames,
+                             settle_time=float(args.settle or 0.0), seed=args.seed,
+                             pose_selection=args.selection, bag_path=args.bag)
 
 
 def show(msg):
     """Draw a CalibrationProgress message as the progress bar on stderr."""
     text = f'{msg.stage} pose {msg.pose_index + 1}/{msg.pose_count} {msg.message}'
-    print('\r' + progress_bar(msg.fraction, text)[:120].ljust(120), end='', file=sys.stderr, flush=True)
+    line = progress_bar(msg.fraction, text)[:120].ljust(120)
+    print('\r' + line, end='', file=sys.stderr, flush=True)
 
 
 def answer(r):
@@ -58,11 +60,13 @@ def call(args, timeout_s=3600.0):
         executor.spin_until_future_complete(future, timeout_sec=timeout_s)
         print(file=sys.stderr)
         if not future.done():
-            print(f'robotenis calibrate: no answer from the service in {timeout_s:.0f} s', file=sys.stderr)
+            print(f'robotenis calibrate: no answer from the service in {timeout_s:.0f} s',
+                  file=sys.stderr)
             return 1
         return answer(future.result())
     except (KeyboardInterrupt, ExternalShutdownException):
-        print('\nrobotenis calibrate: interrupted (the session goes on in the service)', file=sys.stderr)
+        print('\nrobotenis calibrate: interrupted (the session goes on in the service)',
+              file=sys.stderr)
         return 130
     finally:
         executor.shutdown()

@@ -1,9 +1,10 @@
-"""A calibration session reduced to what identification needs: one averaged measurement per rest.
+"""
+A calibration session reduced to what identification needs: one averaged measurement per rest.
 
 Whatever recorded it -- this system's calibration node, another driver's bag, or the static session
 simulator -- a session is the declared robot description plus, for each pose the robot rested at,
-in visit order: the resolver increments and the sphere centre seen by the hand camera, each averaged
-over the rest with its uncertainty.
+in visit order: the resolver increments and the sphere centre seen by the hand camera, each
+averaged over the rest with its uncertainty.
 """
 from dataclasses import dataclass, field
 
@@ -15,7 +16,8 @@ from robotenis_kinematics.identification import Measurements
 
 @dataclass
 class Session:
-    """Averaged measurements of K rests, in the order the robot visited them.
+    """
+    Averaged measurements of K rests, in the order the robot visited them.
 
     description : the declared RobotDescription (what the system believed during the session).
     Theta : (K, 3) resolver increments from home, rad.
@@ -24,8 +26,8 @@ class Session:
     sphere_cov : (K, 3, 3) covariance of each averaged sphere centre, m^2.
     stamps : (K,) time of each rest (middle of the averaging window), s.
     samples : (K,) number of camera frames averaged at each rest.
-    direction : (K, 3) sign of each joint's last motion before each rest, when the recording shows it
-        (poses visited but not measured lie between rests); by default from the order of Theta.
+    direction : (K, 3) sign of each joint's last motion before each rest, when the recording shows
+        it (poses visited but not measured lie between rests); by default from the order of Theta.
     """
 
     description: object
@@ -40,11 +42,14 @@ class Session:
     def __post_init__(self):
         K = len(self.Theta)
         self.Theta = np.asarray(self.Theta, dtype=float).reshape(K, 3)
-        self.sigma_Theta = np.broadcast_to(np.asarray(self.sigma_Theta, dtype=float), (K, 3)).copy()
+        sigma_Theta = np.asarray(self.sigma_Theta, dtype=float)
+        self.sigma_Theta = np.broadcast_to(sigma_Theta, (K, 3)).copy()
         self.sphere = np.asarray(self.sphere, dtype=float).reshape(K, 3)
-        self.sphere_cov = np.broadcast_to(np.asarray(self.sphere_cov, dtype=float), (K, 3, 3)).copy()
+        sphere_cov = np.asarray(self.sphere_cov, dtype=float)
+        self.sphere_cov = np.broadcast_to(sphere_cov, (K, 3, 3)).copy()
         self.stamps = np.asarray(self.stamps, dtype=float).reshape(K)
-        self.samples = np.ones(K, dtype=int) if self.samples is None else np.asarray(self.samples, dtype=int)
+        self.samples = (np.ones(K, dtype=int) if self.samples is None
+                        else np.asarray(self.samples, dtype=int))
         if self.direction is None:
             self.direction = effects.motion_direction(self.Theta)
         self.direction = np.asarray(self.direction, dtype=float).reshape(K, 3)
@@ -53,17 +58,19 @@ class Session:
         return len(self.Theta)
 
     def subset(self, index):
-        """The rests selected by ``index`` (visit order is kept for a sorted index)."""
-        return Session(self.description, self.Theta[index], self.sigma_Theta[index], self.sphere[index],
-                       self.sphere_cov[index], self.stamps[index], self.samples[index], self.direction[index])
+        """Return the rests selected by ``index`` (visit order is kept for a sorted index)."""
+        return Session(self.description, self.Theta[index], self.sigma_Theta[index],
+                       self.sphere[index], self.sphere_cov[index], self.stamps[index],
+                       self.samples[index], self.direction[index])
 
     def measurements(self, camera_rotation=None):
-        """Incremental measurements for identification (eq. 3).
+        """
+        Incremental measurements for identification (eq. 3).
 
         The effector only translates, so with the fixed ball at S and the camera at P + t, the
-        sphere seen at s_k gives P_k = (S - t) - R s_k: Pi_k = -R s_k, and P0 = S - t is the effector
-        position that would put the ball at the optical centre (identified with the rest). R is the
-        declared camera rotation unless another is given (the hand-eye effect refines it).
+        sphere seen at s_k gives P_k = (S - t) - R s_k: Pi_k = -R s_k, and P0 = S - t is the
+        effector position that would put the ball at the optical centre (identified with the rest).
+        R is the declared camera rotation unless another is given (the hand-eye effect refines it).
         """
         R = self.description.camera_rotation if camera_rotation is None else camera_rotation
         Pi = -self.sphere @ R.T

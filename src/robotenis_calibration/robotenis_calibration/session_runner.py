@@ -1,4 +1,5 @@
-"""The calibration session as a state machine, fed with time and measurements, free of ROS.
+"""
+The calibration session as a state machine, fed with time and measurements, free of ROS.
 
 For each planned pose, in order: command it, wait until the joints are still, wait the settle time
 (vibrations of the robot and the ball's holder), then average resolver readings and sphere
@@ -31,22 +32,27 @@ class Rest:
 class RunnerConfig:
     frames_per_pose: int = 500
     settle_time: float = 4.0           # s, the paper's wait at each change of pose
-    # Still: over still_time every joint's readings stay within still_range. Judged on positions, as
-    # the speed a drive differentiates from a quantised resolver at 1 kHz flickers by a count per ms
-    # (3.8e-5 rad / 1 ms = 0.04 rad/s). The range covers a count and +-4 sigma of the 2e-5 rad noise.
+    # Still: over still_time every joint's readings stay within still_range. Judged on positions,
+    # as the speed a drive differentiates from a quantised resolver at 1 kHz flickers by a count
+    # per ms (3.8e-5 rad / 1 ms = 0.04 rad/s). The range covers a count and +-4 sigma of the 2e-5
+    # rad noise.
     still_range: float = 2.5e-4        # rad
     still_time: float = 0.1            # s of stillness before the settle time starts
     move_timeout: float = 10.0         # s to reach a pose
     measure_timeout: float = 10.0      # s to collect the frames before the pose is skipped
-    no_ball_time: float = 0.5          # s without a single detection: the ball is not in view, skip
+    no_ball_time: float = 0.5          # s without a single detection: ball not in view, skip
 
 
 class SessionRunner:
     """Drives one session; ``actions`` lists what the node must do, ``rests`` what was measured."""
 
     def __init__(self, poses, config=RunnerConfig(), replan=None, replan_after=6):
-        """replan(rests, n): n poses (n, 3) to visit instead of the n still planned, or None to keep
-        them; called once, when ``replan_after`` rests are measured."""
+        """
+        Prepare a session over ``poses``, visited in order.
+
+        replan(rests, n): n poses (n, 3) to visit instead of the n still planned, or None to keep
+        them; called once, when ``replan_after`` rests are measured.
+        """
         self.poses = np.asarray(poses, dtype=float)
         self.config = config
         self.replan, self.replan_after = replan, replan_after
@@ -81,7 +87,7 @@ class SessionRunner:
         self._next_pose(t)
 
     def joint_state(self, t, Theta):
-        """One /joint_states sample: the increments (rad) of the three joints."""
+        """Take one /joint_states sample: the increments (rad) of the three joints."""
         Theta = np.asarray(Theta, dtype=float)
         if self.state == MOVING:
             self._window.append((t, Theta))
@@ -97,7 +103,7 @@ class SessionRunner:
             self._rest.Theta.append(Theta)
 
     def detection(self, t, position, covariance):
-        """One sphere detection (optical frame, m) with its covariance (3x3, m^2)."""
+        """Take one sphere detection, in the optical frame (m), with its covariance (3x3, m^2)."""
         if self.state == MEASURING and np.all(np.isfinite(position)):
             self._rest.sphere.append(np.asarray(position, dtype=float))
             self._rest.sphere_cov.append(np.asarray(covariance, dtype=float).reshape(3, 3))
@@ -106,7 +112,8 @@ class SessionRunner:
         """Advance on time alone: settle time over, time-outs, enough frames."""
         c = self.config
         if self.state == MOVING and t - self._t_state > c.move_timeout:
-            self.skipped.append((self.index, f'did not come to rest within {c.move_timeout:.0f} s'))
+            self.skipped.append((self.index,
+                                 f'did not come to rest within {c.move_timeout:.0f} s'))
             self._next_pose(t)
         elif self.state == SETTLING and t - self._t_state >= c.settle_time:
             self._rest = Rest(self.index, t, t)
@@ -117,12 +124,15 @@ class SessionRunner:
             if len(self._rest.sphere) >= c.frames_per_pose:
                 self._finish_rest(t)
             elif not self._rest.sphere and t - self._t_state > c.no_ball_time:
-                self.skipped.append((self.index, f'no detection in {c.no_ball_time:.1f} s (ball not in view?)'))
+                self.skipped.append((self.index, f'no detection in {c.no_ball_time:.1f} s'
+                                                 ' (ball not in view?)'))
                 self.actions.append(('rest_end', self.index))
                 self._next_pose(t)
             elif t - self._t_state > c.measure_timeout:
-                self.skipped.append((self.index, f'only {len(self._rest.sphere)} of {c.frames_per_pose} '
-                                                 f'detections in {c.measure_timeout:.0f} s (ball not in view?)'))
+                self.skipped.append((self.index,
+                                     f'only {len(self._rest.sphere)} of {c.frames_per_pose} '
+                                     f'detections in {c.measure_timeout:.0f} s'
+                                     ' (ball not in view?)'))
                 self.actions.append(('rest_end', self.index))
                 self._next_pose(t)
 
@@ -134,10 +144,11 @@ class SessionRunner:
         if self.replan is not None and len(self.rests) == self.replan_after and remaining > 0:
             poses = self.replan(self.rests, remaining)
             if poses is not None:
-                self.poses = np.concatenate([self.poses[:self.index + 1], np.asarray(poses, dtype=float)])
+                self.poses = np.concatenate([self.poses[:self.index + 1],
+                                             np.asarray(poses, dtype=float)])
         self._next_pose(t)
 
     def take_actions(self):
-        """The actions since the last call, in order."""
+        """Return the actions since the last call, in order."""
         out, self.actions = self.actions, []
         return out

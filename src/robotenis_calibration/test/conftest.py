@@ -19,12 +19,17 @@ def table1():
 
 @pytest.fixture
 def console_script():
-    """The installed path of this package's console script ``name``; the test is skipped when the
-    workspace is not built."""
-    top = os.path.abspath(os.path.join(os.path.dirname(os.path.realpath(__file__)), '..', '..', '..'))
+    """
+    Return the installed path of this package's console script ``name``.
+
+    The test is skipped when the workspace is not built.
+    """
+    here = os.path.dirname(os.path.realpath(__file__))
+    top = os.path.abspath(os.path.join(here, '..', '..', '..'))
 
     def path(name):
-        exe = os.path.join(top, 'install', 'robotenis_calibration', 'lib', 'robotenis_calibration', name)
+        exe = os.path.join(top, 'install', 'robotenis_calibration', 'lib', 'robotenis_calibration',
+                           name)
         if not os.path.exists(exe):
             pytest.skip(f'{exe} is not installed (./robotenis setup)')
         return exe
@@ -33,8 +38,12 @@ def console_script():
 
 @pytest.fixture
 def ros_env(monkeypatch):
-    """A ROS domain of the test's own (random id, localhost only) for this process's rclpy and for the
-    node processes it starts: the environment to start them with."""
+    """
+    Give the test a ROS domain of its own (random id, localhost only).
+
+    The domain serves this process's rclpy and the node processes it starts; the fixture returns
+    the environment to start them with.
+    """
     monkeypatch.setenv('ROS_DOMAIN_ID', str(random.randint(1, 200)))
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     return dict(os.environ)

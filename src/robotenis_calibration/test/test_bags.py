@@ -1,5 +1,8 @@
-"""Recorded sessions: bag round trip, truncated and incomplete bags, rest finding, robust averaging,
-and offline calibration from a bag to RESULT.yaml (bags another driver would record: robotenis_sim.session_bag).
+"""
+Recorded sessions: bag round trip, truncated and incomplete bags, rest finding, robust averaging.
+
+Also offline calibration from a bag to RESULT.yaml (bags another driver would record:
+robotenis_sim.session_bag).
 
 Tolerances are chi-square quantiles at 1 - 1e-3 of the stated noise, so each check fails by chance
 about once in a thousand runs at most.
@@ -7,16 +10,15 @@ about once in a thousand runs at most.
 import os
 import shutil
 
-import numpy as np
-import pytest
 from mcap.records import Message
 from mcap.stream_reader import StreamReader
-from scipy import stats
-
+import numpy as np
+import pytest
 from robotenis_calibration import bag_io, calibrate_cli, pipeline, rests
+from robotenis_kinematics import description
 from robotenis_sim import session_bag as bag_sim
 from robotenis_sim.scenarios import EFFECTS
-from robotenis_kinematics import description
+from scipy import stats
 
 CLEAN = bag_sim.BagSpec(poses=80, seed=3)
 LEVEL = 1e-3
@@ -43,13 +45,14 @@ def clean_session(clean):
 
 @pytest.fixture(scope='module')
 def unmarked(folder):
-    return bag_sim.write(folder / 'unmarked', bag_sim.BagSpec(poses=CLEAN.poses, seed=CLEAN.seed, markers=False))
+    return bag_sim.write(folder / 'unmarked',
+                         bag_sim.BagSpec(poses=CLEAN.poses, seed=CLEAN.seed, markers=False))
 
 
 @pytest.fixture(scope='module')
 def corrupted(folder):
-    spec = bag_sim.BagSpec(poses=CLEAN.poses, seed=CLEAN.seed, nan_fraction=0.01, false_fraction=0.03,
-                           drop_fraction=0.05)
+    spec = bag_sim.BagSpec(poses=CLEAN.poses, seed=CLEAN.seed, nan_fraction=0.01,
+                           false_fraction=0.03, drop_fraction=0.05)
     return bag_sim.write(folder / 'corrupted', spec)
 
 
@@ -74,11 +77,13 @@ def test_bag_round_trip(clean):
         got = {t: [] for t in clean.counts}
         for topic, _, stamp, msg in reader.messages():
             got[topic].append((stamp, msg))
-    assert description.loads(got['/robot_description'][0][1].data).to_dict() == clean.declared.to_dict()
+    assert (description.loads(got['/robot_description'][0][1].data).to_dict()
+            == clean.declared.to_dict())
     markers = got['/calibration/rest']
     starts = np.array([s for s, m in markers if m.start]) * 1e-9
     assert [m.pose_index for _, m in markers if m.start] == list(range(len(clean.Theta)))
-    np.testing.assert_allclose(starts, clean.windows[:, 0], atol=1e-6)   # header stamps, not recording times
+    # header stamps, not recording times
+    np.testing.assert_allclose(starts, clean.windows[:, 0], atol=1e-6)
     stamps = [s for s, _ in got['/joint_states']]
     assert stamps == sorted(stamps)
     last = got['/joint_states'][-1][1]
@@ -100,7 +105,8 @@ def test_writer_never_overwrites_and_names_an_undeclared_topic(tmp_path):
 
 
 @pytest.mark.parametrize('drop_metadata', [False, True])
-def test_truncated_bag_is_read_as_far_as_it_is_whole(clean, clean_session, tmp_path, drop_metadata):
+def test_truncated_bag_is_read_as_far_as_it_is_whole(clean, clean_session, tmp_path,
+                                                     drop_metadata):
     bag = tmp_path / 'cut'
     shutil.copytree(clean.path, bag)
     whole = file_order(bag)
@@ -153,16 +159,19 @@ def test_rests_found_without_markers_agree_with_the_marked_ones(clean, clean_ses
     # each found rest is centred on the same stillness (arrival to departure) as the marked one
     still = CLEAN.settle + CLEAN.frames_per_pose / CLEAN.camera_rate + bag_sim.TAIL
     assert np.all(np.abs(found.stamps - marked.stamps) < 0.5 * still)
-    # both are averages of overlapping samples of the same rest: the difference is within their joint noise
+    # both are averages of overlapping samples of the same rest: the difference is within their
+    # joint noise
     sigma2 = found.sigma_Theta ** 2 + marked.sigma_Theta ** 2
     assert np.sum((found.Theta - marked.Theta) ** 2 / sigma2) < chi2_bound(3 * len(found))
-    assert sphere_chi2(found.sphere, marked.sphere, found.sphere_cov + marked.sphere_cov) < chi2_bound(3 * len(found))
+    assert sphere_chi2(found.sphere, marked.sphere,
+                       found.sphere_cov + marked.sphere_cov) < chi2_bound(3 * len(found))
 
 
 def test_still_periods_need_the_minimum_duration():
     t = np.arange(0.0, 3.0, 0.001)
     Theta = np.zeros((len(t), 3))
-    Theta[:, 0] = np.clip(t - 1.0, 0.0, 0.2) * 0.5 + np.clip(t - 1.6, 0.0, 0.4) * 0.5   # moves 1-1.2 s and 1.6-2 s
+    # moves 1-1.2 s and 1.6-2 s
+    Theta[:, 0] = np.clip(t - 1.0, 0.0, 0.2) * 0.5 + np.clip(t - 1.6, 0.0, 0.4) * 0.5
     periods = rests.still_periods(t, Theta, rests.RestParameters(window=0.1, min_duration=0.5))
     assert len(periods) == 2      # 1.2-1.6 s is still too briefly
     assert periods[0][0] < 0.06 and abs(periods[0][1] - 0.95) < 0.06
@@ -175,7 +184,8 @@ def test_robust_mean_rejects_false_detections():
     n, m = 400, 16
     x = rng.normal(size=(n, 3)) * sigma
     direction = rng.normal(size=(m, 3))
-    x[:m] += direction / np.linalg.norm(direction, axis=1, keepdims=True) * rng.uniform(1e-3, 5e-3, (m, 1))
+    x[:m] += (direction / np.linalg.norm(direction, axis=1, keepdims=True)
+              * rng.uniform(1e-3, 5e-3, (m, 1)))
     mean, S, keep = rests.robust_mean(x, np.zeros(3), 1e-3)
     assert not keep[:m].any()
     assert keep[m:].sum() >= stats.binom.ppf(LEVEL, n - m, 1 - 1e-3)
@@ -183,17 +193,20 @@ def test_robust_mean_rejects_false_detections():
     # the spread of the kept frames is the frames' noise: (N - 1) S_ii / sigma_i^2 are chi2(N - 1)
     N = keep.sum()
     spread = np.sum((N - 1) * np.diag(S) / sigma ** 2)
-    assert stats.chi2.ppf(LEVEL / 2, 3 * (N - 1)) < spread < stats.chi2.ppf(1 - LEVEL / 2, 3 * (N - 1))
+    assert (stats.chi2.ppf(LEVEL / 2, 3 * (N - 1)) < spread
+            < stats.chi2.ppf(1 - LEVEL / 2, 3 * (N - 1)))
 
 
 def test_corrupted_bag_calibrates_within_the_noise_of_the_clean_one(clean_session, corrupted):
     session, notes = rests.load_session(corrupted.path)
-    assert any('NaN or infinite' in n for n in notes) and any('rejected as outliers' in n for n in notes)
+    assert (any('NaN or infinite' in n for n in notes)
+            and any('rejected as outliers' in n for n in notes))
     clean, _ = pipeline.calibrate_session(clean_session[0])
     dirty, _ = pipeline.calibrate_session(session)
     assert clean.plain.names == dirty.plain.names
     d = clean.plain.U - dirty.plain.U
-    assert d @ np.linalg.solve(clean.plain.covariance + dirty.plain.covariance, d) < chi2_bound(len(d))
+    assert (d @ np.linalg.solve(clean.plain.covariance + dirty.plain.covariance, d)
+            < chi2_bound(len(d)))
 
 
 def test_calibrate_writes_a_result_the_description_loader_accepts(clean, tmp_path, capsys):
@@ -207,7 +220,8 @@ def test_calibrate_writes_a_result_the_description_loader_accepts(clean, tmp_pat
     assert 'held-out RMS error' in capsys.readouterr().out
 
 
-@pytest.mark.parametrize('spec', [bag_sim.BagSpec(poses=6, omit=('/sphere/position',)), bag_sim.BagSpec(poses=10)],
+@pytest.mark.parametrize('spec', [bag_sim.BagSpec(poses=6, omit=('/sphere/position',)),
+                                  bag_sim.BagSpec(poses=10)],
                          ids=['missing topic', 'too few rests'])
 def test_a_failed_calibration_leaves_the_previous_result_untouched(tmp_path, capsys, spec):
     bag = bag_sim.write(tmp_path / 'bag', spec)
@@ -220,15 +234,20 @@ def test_a_failed_calibration_leaves_the_previous_result_untouched(tmp_path, cap
 
 
 def test_an_undeclared_effect_in_the_truth_is_named_in_the_result(tmp_path):
-    """joint_scale (0.4-0.5 % gear error) in a ~90-rest session: found in 9 of 10 seeds at this size
-    (the held-out test has ~27 poses), so this seed is no lucky one."""
+    """
+    Find joint_scale (0.4-0.5 % gear error) in a ~90-rest session.
+
+    It is found in 9 of 10 seeds at this size (the held-out test has ~27 poses), so this seed is no
+    lucky one.
+    """
     bag = bag_sim.write(tmp_path / 'bag', bag_sim.BagSpec(poses=130, seed=0, joint_rate=100.0,
-                                                         effects=EFFECTS['joint_scale']))
+                                                          effects=EFFECTS['joint_scale']))
     outcome = pipeline.calibrate_bag(bag.path, tmp_path / 'RESULT.yaml')
     result = description.load(tmp_path / 'RESULT.yaml')
     assert [e['name'] for e in result.effects] == ['joint_scale']
     assert result.report['effects_found'] == ['joint_scale']
-    # truth: reading = (1 + s)(motor - theta0); model: theta = theta0 + (1 + k) reading, so k = 1 / (1 + s) - 1
+    # truth: reading = (1 + s)(motor - theta0); model: theta = theta0 + (1 + k) reading, so
+    # k = 1 / (1 + s) - 1
     k = np.array(result.effects[0]['scale'])
     std = np.array(result.effects[0]['scale_std'])
     expected = 1 / (1 + np.array(EFFECTS['joint_scale']['joint_scale'])) - 1
@@ -237,10 +256,11 @@ def test_an_undeclared_effect_in_the_truth_is_named_in_the_result(tmp_path):
 
 
 def test_joint_states_serialized_by_rclpy_are_read(tmp_path):
-    """rclpy writes no padding before an empty effort sequence; the reader must take it as it is."""
+    """Accept rclpy's JointState bytes, which have no padding before an empty effort sequence."""
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import JointState
-    msg = JointState(name=['motor_2', 'motor_1', 'motor_3'], position=[0.2, 0.1, 0.3], velocity=[1.0, 2.0, 3.0])
+    msg = JointState(name=['motor_2', 'motor_1', 'motor_3'], position=[0.2, 0.1, 0.3],
+                     velocity=[1.0, 2.0, 3.0])
     msg.header.stamp.sec, msg.header.stamp.nanosec = 12, 345
     path = tmp_path / 'bag'
     with bag_io.BagWriter(path) as writer:
@@ -249,18 +269,20 @@ def test_joint_states_serialized_by_rclpy_are_read(tmp_path):
     with bag_io.BagReader(path) as reader:
         (topic, _, stamp, back), = list(reader.messages())
     assert stamp == 12_000_000_345 and back.name == ('motor_2', 'motor_1', 'motor_3')
-    assert back.position == (0.2, 0.1, 0.3) and back.velocity == (1.0, 2.0, 3.0) and back.effort == ()
+    assert (back.position == (0.2, 0.1, 0.3) and back.velocity == (1.0, 2.0, 3.0)
+            and back.effort == ())
     assert reader.notes == []
 
 
 def test_detector_floor_widens_only_the_camera_covariance():
     from robotenis_calibration.session import Session
     from robotenis_kinematics import description
-    s = Session(description.nominal(), np.zeros((2, 3)), 1e-5, np.array([[0.0, 0.0, 0.2], [0.01, 0.0, 0.4]]),
-                np.eye(3) * 1e-12, [0.0, 1.0])
+    s = Session(description.nominal(), np.zeros((2, 3)), 1e-5,
+                np.array([[0.0, 0.0, 0.2], [0.01, 0.0, 0.4]]), np.eye(3) * 1e-12, [0.0, 1.0])
     w = pipeline.with_detector_floor(s, (5e-4, 3e-3))
     np.testing.assert_allclose(np.diagonal(w.sphere_cov, axis1=1, axis2=2),
-                               1e-12 + np.array([[1e-4 ** 2, 1e-4 ** 2, 6e-4 ** 2], [2e-4 ** 2, 2e-4 ** 2, 1.2e-3 ** 2]]))
+                               1e-12 + np.array([[1e-4 ** 2, 1e-4 ** 2, 6e-4 ** 2],
+                                                 [2e-4 ** 2, 2e-4 ** 2, 1.2e-3 ** 2]]))
     np.testing.assert_array_equal(s.sphere_cov, np.eye(3)[None] * 1e-12 * np.ones((2, 1, 1)))
     with pytest.raises(ValueError, match='detector floor'):
         pipeline.with_detector_floor(s, (-1.0, 0.0))

@@ -1,4 +1,5 @@
-"""The `calibration` node as its own process: the Calibrate service's wiring, without a robot.
+"""
+The `calibration` node as its own process: the Calibrate service's wiring, without a robot.
 
 No simulator runs, so a session never gets past its first pose; what is checked is what does not
 need one: a bad request is answered with what went wrong, a second request while a session runs is
@@ -23,7 +24,8 @@ def service(tmp_path, console_script, ros_env):
     log = open(tmp_path / 'node.log', 'w')
     args = ['--ros-args', '-p', f'bags_dir:={tmp_path}', '-p', 'num_poses:=30',
             '-p', f'sphere_guess:={GUESS}']
-    proc = subprocess.Popen([console_script('calibration'), *args], env=ros_env, stdout=log, stderr=subprocess.STDOUT)
+    proc = subprocess.Popen([console_script('calibration'), *args], env=ros_env, stdout=log,
+                            stderr=subprocess.STDOUT)
     rclpy.init()
     node = rclpy.create_node('calibration_probe')
     executor = SingleThreadedExecutor()

@@ -1,16 +1,16 @@
-"""The residual loop on static sessions whose truth carries an effect the description does not declare."""
+"""The residual loop on static sessions whose truth carries an undeclared effect."""
 import numpy as np
 import pytest
-from scipy import stats
-
 from robotenis_calibration import diagnosis, poses, result
-from robotenis_sim.scenarios import EFFECTS as STUDY
 from robotenis_calibration.session import Session
 from robotenis_kinematics import delta, description, effects, synthetic
 from robotenis_sim import static_session
 from robotenis_sim import truth as sim_truth
+from robotenis_sim.scenarios import EFFECTS as STUDY
+from scipy import stats
 
-# Undeclared effects of realistic size (the report's study): each moves the effector by 0.01-0.4 mm.
+# Undeclared effects of realistic size (the report's study): each moves the effector by
+# 0.01-0.4 mm.
 EFFECTS = {name: effect for name, effect in STUDY.items() if effect}
 
 
@@ -18,14 +18,16 @@ EFFECTS = {name: effect for name, effect in STUDY.items() if effect}
 def setting():
     nominal = description.nominal()
     truth = sim_truth.load()
-    guess = truth.sphere_position + np.array([0.03, -0.02, 0.02])  # what the user tells the planner
+    # what the user tells the planner
+    guess = truth.sphere_position + np.array([0.03, -0.02, 0.02])
     P = poses.boundary(nominal, guess, 300, np.random.default_rng(5))
     return nominal, truth, P
 
 
 def session(truth, declared, P, seed):
     rng = np.random.default_rng(seed)
-    Theta, sigma, sphere, cov, _ = static_session.run(truth, declared, P, synthetic.NoiseModel(), rng)
+    Theta, sigma, sphere, cov, _ = static_session.run(truth, declared, P, synthetic.NoiseModel(),
+                                                      rng)
     return Session(declared, Theta, sigma, sphere, cov, 8.0 * np.arange(len(Theta)))
 
 
@@ -49,11 +51,16 @@ def test_each_effect_is_found_named_and_corrected(setting, clean, name):
 
 
 def test_no_effect_is_claimed_on_clean_data_at_the_stated_rate(setting):
-    """Over 30 noise seeds the loop may claim an effect in at most the binomial 99.9 % quantile of
-    sessions at its level ALPHA (each claim needs a Bonferroni-corrected score test first)."""
+    """
+    Over 30 noise seeds, bound how often the loop claims an effect.
+
+    The loop may claim an effect in at most the binomial 99.9 % quantile of sessions at its level
+    ALPHA (each claim needs a Bonferroni-corrected score test first).
+    """
     nominal, truth, P = setting
     seeds = 30
-    claims = sum(bool(diagnose(session(truth, nominal, P, seed)).effects) for seed in range(100, 100 + seeds))
+    claims = sum(bool(diagnose(session(truth, nominal, P, seed)).effects)
+                 for seed in range(100, 100 + seeds))
     assert claims <= stats.binom.ppf(0.999, seeds, diagnosis.ALPHA)
 
 
@@ -64,9 +71,11 @@ def test_clean_residuals_pass_the_size_test(clean):
 
 
 def test_unidentifiable_H_is_dropped_beside_h(setting, clean):
-    test = diagnosis.score_test(clean.plain, session(setting[1], setting[0], setting[2], 7).measurements()
+    test = diagnosis.score_test(clean.plain,
+                                session(setting[1], setting[0], setting[2], 7).measurements()
                                 .subset(clean.train), 'base_geometry')
-    assert set(test.dropped) == {'H1', 'H2', 'H3'} and set(test.parameters) == {'phi1', 'phi2', 'phi3'}
+    assert (set(test.dropped) == {'H1', 'H2', 'H3'}
+            and set(test.parameters) == {'phi1', 'phi2', 'phi3'})
 
 
 def test_result_description_applies_the_effects_in_fk(setting, tmp_path):
@@ -78,7 +87,8 @@ def test_result_description_applies_the_effects_in_fk(setting, tmp_path):
     description.save(desc, path)
     back = description.load(path)
     assert [e['name'] for e in back.effects] == ['backlash']
-    np.testing.assert_allclose(back.effects[0]['width'], EFFECTS['backlash']['backlash'], atol=1e-4)
+    np.testing.assert_allclose(back.effects[0]['width'], EFFECTS['backlash']['backlash'],
+                               atol=1e-4)
     # fk of the readings in visit order, with backlash, lands where the camera saw the effector.
     meas = s.measurements()
     P_fk = delta.forward(back, effects.joint_angles(back, meas.Theta))

@@ -7,16 +7,19 @@ from robotenis_sim import truth as sim_truth
 
 
 def test_the_refined_guess_is_where_the_rests_saw_the_ball():
-    """Rests of the simulator's robot (Table 1 geometry) seen through the nominal description: the
-    guess is off by no more than the nominal model's effector error at those rests (the median of
-    P_k + R s_k, each off by that error), where the user's guess was 5 cm off."""
+    """
+    Rests of the simulator's robot (Table 1 geometry) seen through the nominal description.
+
+    The guess is off by no more than the nominal model's effector error at those rests (the median
+    of P_k + R s_k, each off by that error), where the user's guess was 5 cm off.
+    """
     truth, declared = sim_truth.load(), description.nominal()
-    S = truth.sphere_position - truth.camera_translation       # what the planner's guess stands for
+    S = truth.sphere_position - truth.camera_translation      # what the planner's guess stands for
     rough = S + np.array([0.03, -0.03, 0.03])
     P = poses.boundary(declared, rough, 12, np.random.default_rng(3))
     arm = delta.inverse(truth.geometry, P)
     Theta = truth.increments(arm, np.ones((len(P), 3)), P)
-    s = (S - P) @ truth.camera_rotation                          # the true mounting (rotation only)
+    s = (S - P) @ truth.camera_rotation                         # the true mounting (rotation only)
     guess = poses.refined_guess(declared, Theta, s)
     model_error = np.linalg.norm(delta.forward(declared, declared.theta0 + Theta) - P, axis=1)
     assert np.linalg.norm(guess - S) <= model_error.max()

@@ -1,4 +1,5 @@
-"""`replay` as its own process publishes a bag's messages, with their stamps and their timing.
+"""
+`replay` as its own process publishes a bag's messages, with their stamps and their timing.
 
 A probe node in this process subscribes before the replay starts (the replay waits ``--delay`` for
 discovery); the reliable /sphere/position must arrive complete and in order, the latched
@@ -8,16 +9,15 @@ import signal
 import subprocess
 import time
 
+from geometry_msgs.msg import PointStamped
 import pytest
 import rclpy
-from geometry_msgs.msg import PointStamped
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
-from sensor_msgs.msg import CompressedImage
-from std_msgs.msg import String
-
+from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
 from robotenis_calibration import bag_io
 from robotenis_sim import session_bag as bag_sim
+from sensor_msgs.msg import CompressedImage
+from std_msgs.msg import String
 
 RATE = 4.0
 
@@ -53,14 +53,16 @@ def test_replay_publishes_the_bag(tmp_path, probe, console_script):
     span = (records[-1].log_ns - records[0].log_ns) * 1e-9
     got, descriptions, images = [], [], []
     node.create_subscription(PointStamped, '/sphere/position',
-                             lambda m: got.append((m.header.stamp.sec * 10 ** 9 + m.header.stamp.nanosec,
-                                                   time.monotonic())), QoSProfile(depth=len(stamps)))
+                             lambda m: got.append((m.header.stamp.sec * 10 ** 9
+                                                   + m.header.stamp.nanosec, time.monotonic())),
+                             QoSProfile(depth=len(stamps)))
     node.create_subscription(String, '/robot_description', lambda m: descriptions.append(m.data),
                              QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-    node.create_subscription(CompressedImage, '/camera/image_raw/compressed', images.append, qos_profile_sensor_data)
+    node.create_subscription(CompressedImage, '/camera/image_raw/compressed', images.append,
+                             qos_profile_sensor_data)
     log = open(tmp_path / 'replay.log', 'w')
-    proc = subprocess.Popen([console_script('replay'), bag.path, '--rate', str(RATE), '--delay', '2'], env=env,
-                            stdout=log, stderr=subprocess.STDOUT)
+    proc = subprocess.Popen([console_script('replay'), bag.path, '--rate', str(RATE),
+                             '--delay', '2'], env=env, stdout=log, stderr=subprocess.STDOUT)
     spin_while(executor, proc, 60.0)
     log.close()
     assert proc.returncode == 0, (tmp_path / 'replay.log').read_text()

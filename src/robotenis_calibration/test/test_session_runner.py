@@ -4,8 +4,12 @@ from robotenis_calibration.session_runner import DONE, MEASURING, RunnerConfig, 
 
 
 def drive(runner, visible, dt=0.001, t_end=30.0, seed=0):
-    """A fake robot: moves to each goal in 0.3 s, its readings quantised with the simulator's count
-    and noise; the camera sees the ball at 120 Hz when visible."""
+    """
+    Drive ``runner`` with a fake robot that moves to each goal in 0.3 s.
+
+    Its readings are quantised with the simulator's count and noise; the camera sees the ball at
+    120 Hz when visible.
+    """
     rng = np.random.default_rng(seed)
     q = 2 * np.pi / 163840
     t, goal_time, actions = 0.0, 0.0, []
@@ -43,7 +47,8 @@ def test_each_pose_is_commanded_settled_and_measured_in_order():
 
 def test_a_pose_without_the_ball_is_skipped_with_a_reason():
     poses = np.array([[0.1, 0, 1.0], [0.2, 0, 1.0], [0.3, 0, 1.0]])
-    runner = SessionRunner(poses, RunnerConfig(frames_per_pose=10, settle_time=0.1, measure_timeout=1.0))
+    runner = SessionRunner(poses, RunnerConfig(frames_per_pose=10, settle_time=0.1,
+                                               measure_timeout=1.0))
     drive(runner, lambda k: k != 1)
     assert [r.index for r in runner.rests] == [0, 2]
     assert runner.skipped[0][0] == 1 and 'ball not in view' in runner.skipped[0][1]
@@ -60,7 +65,8 @@ def test_no_measurement_while_moving():
 
 def test_a_ball_out_of_view_costs_only_the_no_ball_time():
     poses = np.array([[0.1, 0, 1.0], [0.2, 0, 1.0]])
-    config = RunnerConfig(frames_per_pose=10, settle_time=0.1, no_ball_time=0.5, measure_timeout=10.0)
+    config = RunnerConfig(frames_per_pose=10, settle_time=0.1, no_ball_time=0.5,
+                          measure_timeout=10.0)
     runner = SessionRunner(poses, config)
     actions = drive(runner, lambda k: k != 0)
     starts = {a[1]: t for t, a in actions if a[0] == 'rest_start'}
@@ -70,8 +76,11 @@ def test_a_ball_out_of_view_costs_only_the_no_ball_time():
 
 
 def test_the_poses_after_the_first_rests_are_planned_again():
-    """replan is asked once, after replan_after measured rests, for the poses still to come; the goals
-    commanded from then on are its poses, and the session keeps its length."""
+    """
+    ``replan`` is asked once, after replan_after measured rests, for the poses still to come.
+
+    The goals commanded from then on are its poses, and the session keeps its length.
+    """
     poses = np.array([[0.1 * k, 0, 1.0] for k in range(1, 6)])
     asked = []
 
@@ -79,7 +88,8 @@ def test_the_poses_after_the_first_rests_are_planned_again():
         asked.append(([r.index for r in rests], n))
         return np.full((n, 3), 7.0)
 
-    runner = SessionRunner(poses, RunnerConfig(frames_per_pose=5, settle_time=0.1), replan, replan_after=2)
+    runner = SessionRunner(poses, RunnerConfig(frames_per_pose=5, settle_time=0.1), replan,
+                           replan_after=2)
     actions = drive(runner, lambda k: True)
     assert asked == [([0, 1], 3)]
     goals = [a[1] for _, a in actions if a[0] == 'goal']
@@ -90,6 +100,7 @@ def test_the_poses_after_the_first_rests_are_planned_again():
 
 def test_a_replan_that_keeps_the_plan():
     poses = np.array([[0.1 * k, 0, 1.0] for k in range(1, 4)])
-    runner = SessionRunner(poses, RunnerConfig(frames_per_pose=5, settle_time=0.1), lambda rests, n: None, 1)
+    runner = SessionRunner(poses, RunnerConfig(frames_per_pose=5, settle_time=0.1),
+                           lambda rests, n: None, 1)
     actions = drive(runner, lambda k: True)
     np.testing.assert_array_equal([a[1] for _, a in actions if a[0] == 'goal'], poses)

@@ -1,9 +1,12 @@
-"""Kinematics of the RoboTenis Delta robot in the calibration paper's notation (eqs. 1-2).
+"""
+Kinematics of the RoboTenis Delta robot in the calibration paper's notation (eqs. 1-2).
 
 Frame Sigma_0: origin at the base centre, x toward motor 1, z down into the workspace (m, rad).
 Leg i has its motor axis at A_i = H_i (cos phi_i, sin phi_i, 0); the arm end is
 
-    B_i = [(H_i + a_i cos theta_i) cos phi_i, (H_i + a_i cos theta_i) sin phi_i, a_i sin theta_i]   (2)
+    B_i = [(H_i + a_i cos theta_i) cos phi_i,
+           (H_i + a_i cos theta_i) sin phi_i,
+           a_i sin theta_i]                                                 (2)
 
 and the forearm's ball joint on the effector is C_i = P + h_i (cos phi_i, sin phi_i, 0). The
 forearm closes the loop: Gamma_i = |C_i - B_i|^2 - b_i^2 = 0 (1). Angles theta_i are absolute arm
@@ -15,7 +18,7 @@ import numpy as np
 
 
 def leg_directions(desc):
-    """Unit vectors e_i = (cos phi_i, sin phi_i, 0), shape (3, 3), one row per leg."""
+    """Return the unit vectors e_i = (cos phi_i, sin phi_i, 0), shape (3, 3), one row per leg."""
     return np.stack([np.cos(desc.phi), np.sin(desc.phi), np.zeros(3)], axis=-1)
 
 
@@ -40,21 +43,24 @@ def constraint(desc, P, theta):
 
 
 def inverse(desc, P):
-    """Absolute arm angles theta (..., 3) that put the effector at P (..., 3): closed form, elbow out.
+    """
+    Return the absolute arm angles theta (..., 3) that put the effector at P (..., 3), elbow out.
 
-    In the plane of leg i, with u = C_i.e_i - H_i, v = C_i.(z x e_i) and w = C_iz, eq. (1) becomes
-    u cos(theta) + w sin(theta) = K with K = (u^2 + v^2 + w^2 + a^2 - b^2) / (2a), so
-    theta = atan2(w, u) - acos(K / sqrt(u^2 + w^2)); the minus sign keeps the elbow outward.
+    Closed form: in the plane of leg i, with u = C_i.e_i - H_i, v = C_i.(z x e_i) and w = C_iz,
+    eq. (1) becomes u cos(theta) + w sin(theta) = K with K = (u^2 + v^2 + w^2 + a^2 - b^2) / (2a),
+    so theta = atan2(w, u) - acos(K / sqrt(u^2 + w^2)); the minus sign keeps the elbow outward.
 
     Raises
     ------
     ValueError
         if a position is out of reach of some leg.
+
     """
     theta, reachable = _inverse(desc, P)
     if not np.all(reachable):
         bad = np.argwhere(~np.all(reachable, axis=-1))
-        raise ValueError(f"position out of reach: {np.asarray(P).reshape(-1, 3)[bad[0][0]] if bad.size else P}")
+        where = np.asarray(P).reshape(-1, 3)[bad[0][0]] if bad.size else P
+        raise ValueError(f'position out of reach: {where}')
     return theta
 
 
@@ -74,12 +80,13 @@ def _inverse(desc, P):
 
 
 def reachable(desc, P):
-    """True where every leg can reach P (shape (...,))."""
+    """Return True where every leg can reach P (shape (...,))."""
     return np.all(_inverse(desc, P)[1], axis=-1)
 
 
 def forward(desc, theta):
-    """Effector position P (..., 3) for absolute arm angles theta (..., 3): closed form.
+    """
+    Return the effector position P (..., 3) for absolute arm angles theta (..., 3): closed form.
 
     P lies on the three spheres of radius b_i around Q_i = B_i - h_i e_i. Subtracting the sphere
     equations leaves a line; its two intersections with the first sphere are the two assembly
@@ -89,6 +96,7 @@ def forward(desc, theta):
     ------
     ValueError
         if the three spheres do not meet (no assembly for these angles).
+
     """
     Q = elbow_points(desc, theta) - desc.h[:, None] * leg_directions(desc)
     r = desc.b
@@ -105,7 +113,8 @@ def forward(desc, theta):
     y = (r[0] ** 2 - r[2] ** 2 + i ** 2 + j ** 2) / (2 * j) - i * x / j
     z2 = r[0] ** 2 - x ** 2 - y ** 2
     if np.any(z2 < 0):
-        raise ValueError("forward kinematics: the forearm spheres do not meet for these arm angles")
+        raise ValueError('forward kinematics: the forearm spheres do not meet'
+                         ' for these arm angles')
     z = np.sqrt(z2)
     base = Q[..., 0, :] + x[..., None] * ex + y[..., None] * ey
     # Pick the branch with the larger base-frame z (below the base).
@@ -114,7 +123,8 @@ def forward(desc, theta):
 
 
 def jacobian_parts(desc, P, theta):
-    """The two halves of the differentiated constraint, A dP + diag(beta) dtheta = 0.
+    """
+    Return the two halves of the differentiated constraint, A dP + diag(beta) dtheta = 0.
 
     A (..., 3, 3) has rows 2 (C_i - B_i)^T; beta (..., 3) is -2 (C_i - B_i) . dB_i/dtheta_i.
     """
@@ -135,7 +145,7 @@ def jacobian(desc, P, theta=None):
 
 
 def inverse_jacobian(desc, P, theta=None):
-    """J_R^-1 with dtheta/dt = J_R^-1 dP/dt, shape (..., 3, 3); finite wherever no leg is stretched."""
+    """J_R^-1 with dtheta/dt = J_R^-1 dP/dt, shape (..., 3, 3); finite if no leg is stretched."""
     if theta is None:
         theta = inverse(desc, P)
     A, beta = jacobian_parts(desc, P, theta)
@@ -143,19 +153,20 @@ def inverse_jacobian(desc, P, theta=None):
 
 
 def singularity_distance(desc, P):
-    """Distance (m) from P to the nearest serial singularity: a leg fully stretched or folded (...,)."""
+    """Distance (m) from P to the nearest serial singularity (leg stretched or folded), (...,)."""
     return np.min(leg_singularity_margins(desc, P), axis=-1)
 
 
 def leg_singularity_margins(desc, P):
-    """Per leg, the distance (m) of C_i to the boundary of leg i's workspace, shape (..., 3).
+    """
+    Return per leg the distance (m) from C_i to the boundary of leg i's workspace, shape (..., 3).
 
     C_i is reachable by leg i while the circle its elbow B_i can describe (centre A_i, radius a_i,
     in the vertical plane of the leg) has points both nearer and farther than b_i. With rho the
     in-plane distance of C_i from A_i and v its distance from that plane, the nearest and farthest
-    circle points are at d_min = hypot(rho - a, v) and d_max = hypot(rho + a, v); both are distance
-    functions, so min(b - d_min, d_max - b) is the metric distance of C_i to the boundary of leg i's
-    workspace. Negative outside it.
+    circle points are at d_min = hypot(rho - a, v) and d_max = hypot(rho + a, v); both are
+    distance functions, so min(b - d_min, d_max - b) is the metric distance of C_i to the boundary
+    of leg i's workspace. Negative outside it.
     """
     C = effector_joints(desc, P)
     e = leg_directions(desc)
@@ -168,9 +179,11 @@ def leg_singularity_margins(desc, P):
 
 
 def parallel_conditioning(desc, P, theta=None):
-    """Smallest singular value of the matrix of unit forearm directions (dimensionless, (...,)).
+    """
+    Return the smallest singular value of the matrix of unit forearm directions.
 
-    Zero at the parallel (type 2) singularity where the three forearms become coplanar.
+    Dimensionless, shape (...,). Zero at the parallel (type 2) singularity where the three
+    forearms become coplanar.
     """
     if theta is None:
         theta = inverse(desc, P)

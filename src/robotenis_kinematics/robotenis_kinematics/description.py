@@ -1,15 +1,16 @@
-"""The robot description: one YAML file that every tool reads and writes.
+"""
+The robot description: one YAML file that every tool reads and writes.
 
 Schema (SI units, REP-103)::
 
-    legs:                       # three maps, leg i = 1, 2, 3 in order
+    legs:                  # three maps, leg i = 1, 2, 3 in order
       - {phi: 0.0, H: 0.21, a: 0.5, b: 1.0, h: 0.05, theta0: 0.0}
     camera:
       frame_id: camera_optical
-      rotation: [[0, 0, 1], [1, 0, 0], [0, 1, 0]]   # columns: optical x, y, z in the effector frame
+      rotation: [[0, 0, 1], [1, 0, 0], [0, 1, 0]]  # columns: optical x, y, z in the effector frame
     sphere_radius: 0.0095
-    effects: []                 # optional: effects found by calibration (robotenis_kinematics.effects)
-    report: {}                  # optional: free-form, written by calibration, ignored by the model
+    effects: []            # optional: effects found by calibration (robotenis_kinematics.effects)
+    report: {}             # optional: free-form, written by calibration, ignored by the model
 
 The frame is the paper's Sigma_0: origin at the centre of the base, x toward motor 1 (phi_1 = 0),
 z down into the workspace (so gravity is +z), y completing a right-handed frame. Per leg
@@ -18,10 +19,10 @@ distance from the origin to A_i, ``a`` the arm, ``b`` the forearm, ``h`` the dis
 effector centre P to the ball joint C_i (m), ``theta0`` the arm angle at the resolvers' home (rad,
 positive down).
 """
+from dataclasses import dataclass, field
 import math
 import os
 import tempfile
-from dataclasses import dataclass, field
 
 import numpy as np
 from robotenis_kinematics import effects as effect_models
@@ -33,7 +34,8 @@ LEG_KEYS = ('phi', 'H', 'a', 'b', 'h', 'theta0')
 
 @dataclass
 class RobotDescription:
-    """Geometry of the three legs, the camera mounting and the calibration sphere.
+    """
+    Geometry of the three legs, the camera mounting and the calibration sphere.
 
     Attributes are numpy arrays of shape (3,) per leg parameter, so that ``d.a[i]`` is a_(i+1).
     """
@@ -54,13 +56,14 @@ class RobotDescription:
         """Return a deep copy with some fields replaced."""
         fields = {k: np.array(getattr(self, k), dtype=float) for k in LEG_KEYS}
         fields.update(camera_rotation=np.array(self.camera_rotation, dtype=float),
-                      camera_frame_id=self.camera_frame_id, sphere_radius=float(self.sphere_radius),
+                      camera_frame_id=self.camera_frame_id,
+                      sphere_radius=float(self.sphere_radius),
                       effects=[dict(e) for e in self.effects], report=dict(self.report))
         fields.update(changes)
         return RobotDescription(**fields)
 
     def to_dict(self):
-        """The YAML schema as plain Python types."""
+        """Return the YAML schema as plain Python types."""
         legs = [{k: float(getattr(self, k)[i]) for k in LEG_KEYS} for i in range(3)]
         out = {
             'legs': legs,
@@ -90,62 +93,67 @@ def _plain(obj):
 
 def _number(value, key):
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise DescriptionError(f"{key}: expected a number, got {type(value).__name__} {value!r}")
+        raise DescriptionError(f'{key}: expected a number, got {type(value).__name__} {value!r}')
     if not math.isfinite(value):
-        raise DescriptionError(f"{key}: must be finite, got {value!r}")
+        raise DescriptionError(f'{key}: must be finite, got {value!r}')
     return float(value)
 
 
 def _require(mapping, key, where):
     if not isinstance(mapping, dict):
-        raise DescriptionError(f"{where}: expected a map, got {type(mapping).__name__}")
+        raise DescriptionError(f'{where}: expected a map, got {type(mapping).__name__}')
     if key not in mapping:
         raise DescriptionError(f"{where + '.' if where else ''}{key}: missing key")
     return mapping[key]
 
 
 def from_dict(data):
-    """Build a RobotDescription from the parsed YAML, checking every key.
+    """
+    Build a RobotDescription from the parsed YAML, checking every key.
 
     Raises
     ------
     DescriptionError
         naming the key that is missing, of the wrong type or not finite.
+
     """
     if not isinstance(data, dict):
-        raise DescriptionError(f"robot description: expected a map at the top level, got {type(data).__name__}")
+        raise DescriptionError('robot description: expected a map at the top level,'
+                               f' got {type(data).__name__}')
     legs = _require(data, 'legs', '')
     if not isinstance(legs, list) or len(legs) != 3:
-        raise DescriptionError(f"legs: expected a list of three maps, got {legs!r:.80}")
+        raise DescriptionError(f'legs: expected a list of three maps, got {legs!r:.80}')
     values = {k: np.empty(3) for k in LEG_KEYS}
     for i, leg in enumerate(legs):
         for k in LEG_KEYS:
             values[k][i] = _number(_require(leg, k, f'legs[{i}]'), f'legs[{i}].{k}')
     for k in ('a', 'b'):
         if np.any(values[k] <= 0):
-            raise DescriptionError(f"legs[{int(np.argmin(values[k]))}].{k}: must be positive")
+            raise DescriptionError(f'legs[{int(np.argmin(values[k]))}].{k}: must be positive')
     camera = _require(data, 'camera', '')
     frame_id = _require(camera, 'frame_id', 'camera')
     if not isinstance(frame_id, str) or not frame_id:
-        raise DescriptionError(f"camera.frame_id: expected a non-empty string, got {frame_id!r}")
+        raise DescriptionError(f'camera.frame_id: expected a non-empty string, got {frame_id!r}')
     rows = _require(camera, 'rotation', 'camera')
-    if not isinstance(rows, list) or len(rows) != 3 or any(not isinstance(r, list) or len(r) != 3 for r in rows):
-        raise DescriptionError("camera.rotation: expected 3 rows of 3 numbers")
+    if (not isinstance(rows, list) or len(rows) != 3
+            or any(not isinstance(r, list) or len(r) != 3 for r in rows)):
+        raise DescriptionError('camera.rotation: expected 3 rows of 3 numbers')
     R = np.array([[_number(v, f'camera.rotation[{r}][{c}]') for c, v in enumerate(row)]
                   for r, row in enumerate(rows)])
     if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
-        raise DescriptionError("camera.rotation: not a rotation matrix (R^T R != I or det R != 1)")
+        raise DescriptionError('camera.rotation: not a rotation matrix (R^T R != I or det R != 1)')
     radius = _number(_require(data, 'sphere_radius', ''), 'sphere_radius')
     if radius <= 0:
-        raise DescriptionError("sphere_radius: must be positive")
+        raise DescriptionError('sphere_radius: must be positive')
     effects = data.get('effects') or []
-    if not isinstance(effects, list) or any(not isinstance(e, dict) or 'name' not in e for e in effects):
+    if (not isinstance(effects, list)
+            or any(not isinstance(e, dict) or 'name' not in e for e in effects)):
         raise DescriptionError("effects: expected a list of maps, each with a 'name'")
     for i, e in enumerate(effects):
         effect_models.validate(e, f'effects[{i}]')   # each effect model checks its own keys
     report = data.get('report') or {}
     if not isinstance(report, dict):
-        raise DescriptionError("report: expected a map")
+        raise DescriptionError('report: expected a map')
     return RobotDescription(camera_rotation=R, camera_frame_id=frame_id, sphere_radius=radius,
                             effects=effects, report=report, **values)
 
@@ -156,13 +164,13 @@ def load(path):
         with open(path) as f:
             data = yaml.safe_load(f)
     except OSError as e:
-        raise DescriptionError(f"{path}: cannot read ({e.strerror})") from e
+        raise DescriptionError(f'{path}: cannot read ({e.strerror})') from e
     except yaml.YAMLError as e:
-        raise DescriptionError(f"{path}: not valid YAML ({e})") from e
+        raise DescriptionError(f'{path}: not valid YAML ({e})') from e
     try:
         return from_dict(data)
     except DescriptionError as e:
-        raise DescriptionError(f"{path}: {e}") from None
+        raise DescriptionError(f'{path}: {e}') from None
 
 
 def loads(text):
@@ -170,16 +178,16 @@ def loads(text):
     try:
         return from_dict(yaml.safe_load(text))
     except yaml.YAMLError as e:
-        raise DescriptionError(f"robot description: not valid YAML ({e})") from e
+        raise DescriptionError(f'robot description: not valid YAML ({e})') from e
 
 
 def dumps(desc):
-    """The description as YAML text."""
+    """Return the description as YAML text."""
     return yaml.safe_dump(desc.to_dict(), sort_keys=False, default_flow_style=None)
 
 
 def save(desc, path):
-    """Write atomically: a temporary file in the same folder, then rename, so nothing is half written."""
+    """Write atomically: temp file in the same folder, then rename, so nothing is half written."""
     text = dumps(desc)
     folder = os.path.dirname(os.path.abspath(path))
     fd, tmp = tempfile.mkstemp(prefix='.tmp-', suffix='.yaml', dir=folder)
@@ -213,5 +221,5 @@ def _share_config():
 
 
 def nominal():
-    """The nominal RoboTenis description (Table 1, nominal column; camera looking along base +x)."""
+    """Return the nominal RoboTenis description (Table 1 nominal column; camera facing base +x)."""
     return load(config_path('nominal.yaml'))

@@ -1,7 +1,9 @@
-"""Effects beyond the paper's geometry: the residual loop's candidates, and what fk applies.
+"""
+Effects beyond the paper's geometry: the residual loop's candidates, and what fk applies.
 
-A calibrated robot description carries them in its ``effects`` list, each a map with ``name``, its
-parameter (three numbers, one per joint or per axis) and that parameter's standard deviation::
+A calibrated robot description carries them in its ``effects`` list, each a map with ``name``,
+its parameter (three numbers, one per joint or per axis) and that parameter's standard
+deviation::
 
     - {name: joint_scale, scale: [k1, k2, k3], scale_std: [...]}
     - {name: backlash, width: [w1, w2, w3], width_std: [...]}
@@ -14,10 +16,10 @@ The joint effects turn resolver increments Theta into arm angles (model of the r
 
     theta = theta0 + (1 + k) Theta - (w / 2) dir + c tau_g(P, theta0 + Theta)
 
-with dir the sign of the joint's last motion (the arm lags the motor by half the backlash width) and
-tau_g the gravity torque on the arm (positive down) of a robot with the declared gravity load. The
-hand-eye rotation r turns the camera's measured increments: Pi_true = exp([r]x) Pi. base_geometry
-is applied in the legs' phi and H themselves; its entry records what was identified.
+with dir the sign of the joint's last motion (the arm lags the motor by half the backlash width)
+and tau_g the gravity torque on the arm (positive down) of a robot with the declared gravity load.
+The hand-eye rotation r turns the camera's measured increments: Pi_true = exp([r]x) Pi.
+base_geometry is applied in the legs' phi and H themselves; its entry records what was identified.
 """
 import numpy as np
 
@@ -25,8 +27,9 @@ from robotenis_kinematics import delta
 from robotenis_kinematics.errors import DescriptionError
 
 G = 9.81
-# Nominal static gravity load (kg): each arm carries half its own mass (m_a = 1.0) and half a forearm
-# (m_b = 1.315) at the elbow; the platform (with camera, 1.05) carries the other forearm halves.
+# Nominal static gravity load (kg): each arm carries half its own mass (m_a = 1.0) and half a
+# forearm (m_b = 1.315) at the elbow; the platform (with camera, 1.05) carries the other forearm
+# halves.
 NOMINAL_GRAVITY_LOAD = {'arm': 0.5 * 1.0 + 0.5 * 1.315, 'platform': 1.05 + 1.5 * 1.315}
 
 # effect -> (YAML key of its parameter, unit used to scale it in the observability analysis)
@@ -43,7 +46,7 @@ MODELS = tuple(PARAMETERS) + ('base_geometry',)
 def _three(value, key):
     arr = np.asarray(value, dtype=float) if isinstance(value, list) else None
     if arr is None or arr.shape != (3,) or not np.all(np.isfinite(arr)):
-        raise DescriptionError(f"{key}: expected three finite numbers, got {value!r}")
+        raise DescriptionError(f'{key}: expected three finite numbers, got {value!r}')
     return arr
 
 
@@ -51,28 +54,29 @@ def validate(effect, where):
     """Check one effect map; raises DescriptionError naming the key."""
     name = effect.get('name')
     if name not in MODELS:
-        raise DescriptionError(f"{where}.name: unknown effect {name!r} (known: {', '.join(MODELS)})")
+        known = ', '.join(MODELS)
+        raise DescriptionError(f'{where}.name: unknown effect {name!r} (known: {known})')
     keys = BASE_GEOMETRY_KEYS if name == 'base_geometry' else (PARAMETERS[name][0],)
     for key in keys:
         if key not in effect and name != 'base_geometry':
-            raise DescriptionError(f"{where}.{key}: missing key")
+            raise DescriptionError(f'{where}.{key}: missing key')
         if key in effect:
             _three(effect[key], f'{where}.{key}')
     if name == 'gravity_compliance':
         load = effect.get('gravity_load', NOMINAL_GRAVITY_LOAD)
         for part in ('arm', 'platform'):
             if not isinstance(load, dict) or not isinstance(load.get(part), (int, float)):
-                raise DescriptionError(f"{where}.gravity_load.{part}: expected a number (kg)")
+                raise DescriptionError(f'{where}.gravity_load.{part}: expected a number (kg)')
 
 
 def parameters(desc):
-    """The effect parameters a description holds, as {name: array of 3} (base_geometry excluded)."""
+    """Return a description's effect parameters as {name: array of 3} (base_geometry excluded)."""
     return {e['name']: np.asarray(e[PARAMETERS[e['name']][0]], dtype=float)
             for e in desc.effects if e['name'] in PARAMETERS}
 
 
 def gravity_load(desc):
-    """The gravity load (kg) of the description's compliance effect, or the nominal one."""
+    """Return the gravity load (kg) of the description's compliance effect, or the nominal one."""
     for e in desc.effects:
         if e['name'] == 'gravity_compliance':
             return e.get('gravity_load', NOMINAL_GRAVITY_LOAD)
@@ -80,10 +84,11 @@ def gravity_load(desc):
 
 
 def gravity_torque(desc, P, theta, load=None):
-    """Gravity torque on each arm at rest (..., 3), N m, positive pulling the arm down.
+    """
+    Return the gravity torque on each arm at rest (..., 3), N m, positive pulling the arm down.
 
-    By virtual work, tau = m_arm g a cos(theta) + J_R^T (m_platform g z): the arm's load at the elbow
-    and the platform's weight carried through the Jacobian (z is down, so gravity is +z).
+    By virtual work, tau = m_arm g a cos(theta) + J_R^T (m_platform g z): the arm's load at the
+    elbow and the platform's weight carried through the Jacobian (z is down, so gravity is +z).
     """
     load = NOMINAL_GRAVITY_LOAD if load is None else load
     J = delta.jacobian(desc, P, theta)
@@ -91,7 +96,8 @@ def gravity_torque(desc, P, theta, load=None):
 
 
 def motion_direction(Theta):
-    """Sign (+1/-1) of each joint's last motion before each reading, from the visit order (K, 3).
+    """
+    Sign (+1/-1) of each joint's last motion before each reading, from the visit order (K, 3).
 
     The robot starts at home (Theta = 0); a joint that did not move keeps its previous sign.
     """
@@ -106,7 +112,8 @@ def motion_direction(Theta):
 
 
 def model_joint_angles(desc, fx, Theta, direction, P, load=None):
-    """Arm angles (K, 3) under the joint effects in ``fx``, and d theta / d(effect parameter).
+    """
+    Arm angles (K, 3) under the joint effects in ``fx``, and d theta / d(effect parameter).
 
     Returns (theta, {effect name: (K, 3)}): the derivative of theta_ik with respect to joint i's
     parameter of each joint effect in ``fx`` (see the module docstring for the model).
@@ -124,12 +131,16 @@ def model_joint_angles(desc, fx, Theta, direction, P, load=None):
 
 
 def increments_for(desc, theta, direction, P):
-    """Resolver increments Theta (..., 3) that give the arm angles theta under the description's joint
-    effects: the inverse of ``model_joint_angles``, for commanding a robot with a calibrated model.
+    """
+    Return the resolver increments Theta (..., 3) that give the arm angles theta.
+
+    This inverts ``model_joint_angles`` under the description's joint effects, for commanding a
+    robot with a calibrated model.
 
     ``direction`` is the sign of each joint's motion into this pose and P the effector position
-    (for compliance). Theta = (theta - theta0 + w/2 dir - c tau_g(P, theta0 + Theta)) / (1 + k), solved
-    by fixed point: the sag changes by c dtau/dtheta ~ 1e-3 of a step, so three passes are exact.
+    (for compliance). Theta = (theta - theta0 + w/2 dir - c tau_g(P, theta0 + Theta)) / (1 + k),
+    solved by fixed point: the sag changes by c dtau/dtheta ~ 1e-3 of a step, so three passes are
+    exact.
     """
     fx = parameters(desc)
     k = fx.get('joint_scale', np.zeros(3))
@@ -137,7 +148,8 @@ def increments_for(desc, theta, direction, P):
     Theta = lead / (1 + k)
     if 'gravity_compliance' in fx:
         for _ in range(3):
-            sag = fx['gravity_compliance'] * gravity_torque(desc, P, desc.theta0 + Theta, gravity_load(desc))
+            torque = gravity_torque(desc, P, desc.theta0 + Theta, gravity_load(desc))
+            sag = fx['gravity_compliance'] * torque
             Theta = (lead - sag) / (1 + k)
     return Theta
 
@@ -154,16 +166,19 @@ def rotation_vector_matrix(r):
 
 
 def rotate_increments(fx, Pi):
-    """Measured increments turned by the hand-eye rotation, if the model has one."""
+    """Return the measured increments turned by the hand-eye rotation, if the model has one."""
     if 'hand_eye_rotation' not in fx:
         return Pi
     return Pi @ rotation_vector_matrix(fx['hand_eye_rotation']).T
 
 
 def joint_angles(desc, Theta):
-    """Arm angles (N, 3) for resolver increments (N, 3) visited in this order, with every joint
-    effect the description holds. Compliance depends on the pose, so it is iterated with FK (the sag
-    is tiny: two passes agree to far below a resolver count)."""
+    """
+    Return the arm angles (N, 3) for resolver increments (N, 3) visited in this order.
+
+    Every joint effect the description holds is applied. Compliance depends on the pose, so it is
+    iterated with FK (the sag is tiny: two passes agree to far below a resolver count).
+    """
     Theta = np.asarray(Theta, dtype=float).reshape(-1, 3)
     fx = parameters(desc)
     direction = motion_direction(Theta)
@@ -174,5 +189,6 @@ def joint_angles(desc, Theta):
     sagged = theta
     for _ in range(2):
         P = delta.forward(desc, sagged)
-        sagged = theta + fx['gravity_compliance'] * gravity_torque(desc, P, theta, gravity_load(desc))
+        torque = gravity_torque(desc, P, theta, gravity_load(desc))
+        sagged = theta + fx['gravity_compliance'] * torque
     return sagged

@@ -1,9 +1,10 @@
-"""`./robotenis fk --model FILE`: resolver readings on stdin to effector positions on stdout.
+"""
+`./robotenis fk --model FILE`: resolver readings on stdin to effector positions on stdout.
 
-Input: CSV rows ``Theta1,Theta2,Theta3`` (rad, increments from home), in the order the robot visited
-them (effects such as backlash depend on that order); blank lines and lines starting with '#' are
-skipped. Output: one ``x,y,z`` row (m, base frame) per input row, applying everything the model file
-holds: its geometry and its effects.
+Input: CSV rows ``Theta1,Theta2,Theta3`` (rad, increments from home), in the order the robot
+visited them (effects such as backlash depend on that order); blank lines and lines starting with
+'#' are skipped. Output: one ``x,y,z`` row (m, base frame) per input row, applying everything the
+model file holds: its geometry and its effects.
 """
 import argparse
 import sys
@@ -24,9 +25,9 @@ def parse_rows(lines):
         try:
             values = [float(f) for f in fields]
         except ValueError:
-            raise ValueError(f"line {number}: not three numbers: {text!r}") from None
+            raise ValueError(f'line {number}: not three numbers: {text!r}') from None
         if len(values) != 3 or not np.all(np.isfinite(values)):
-            raise ValueError(f"line {number}: expected three finite numbers, got {text!r}")
+            raise ValueError(f'line {number}: expected three finite numbers, got {text!r}')
         rows.append(values)
     return np.array(rows, dtype=float).reshape(-1, 3)
 
@@ -34,7 +35,8 @@ def parse_rows(lines):
 def main(argv=None):
     parser = argparse.ArgumentParser(prog='robotenis fk', description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--model', required=True, help='robot description YAML (nominal or calibrated)')
+    parser.add_argument('--model', required=True,
+                        help='robot description YAML (nominal or calibrated)')
     args = parser.parse_args(argv)
     try:
         desc = description.load(args.model)

@@ -1,27 +1,30 @@
-"""Identification of the Delta robot's geometry from incremental measurements (paper, eqs. 3-8).
+"""
+Identification of the Delta robot's geometry from incremental measurements (paper, eqs. 3-8).
 
 Each pose k gives the resolver increments Theta_k (rad) and the incremental effector position
-Pi_k = P_k - P0 (m, base frame) measured by the hand camera (eq. 3). With theta_ik = theta_i0 + Theta_ik
-the loop-closure equations of the three legs are (eq. 4)
+Pi_k = P_k - P0 (m, base frame) measured by the hand camera (eq. 3). With
+theta_ik = theta_i0 + Theta_ik the loop-closure equations of the three legs are (eq. 4)
 
-    Gamma_ik = |P0 + Pi_k + h_i e_i - (H_i + a_i cos theta_ik) e_i - a_i sin theta_ik z|^2 - b_i^2 = 0,
+    Gamma_ik = |P0 + Pi_k + h_i e_i - (H_i + a_i cos theta_ik) e_i - a_i sin theta_ik z|^2
+               - b_i^2 = 0,
 
 stacked leg by leg into Phi(U, V) (eq. 5). The paper's unknowns are U = [u_1 u_2 u_3 P0] with
-u_i = [a_i b_i h_i theta_i0] (15 parameters); H_i and phi_i can be added for the observability study,
-and so can the parameters of the effects the residual loop adds (``effects.py``): joint-side effects
-shift theta_ik, the hand-eye rotation turns Pi_k.
+u_i = [a_i b_i h_i theta_i0] (15 parameters); H_i and phi_i can be added for the observability
+study, and so can the parameters of the effects the residual loop adds (``effects.py``):
+joint-side effects shift theta_ik, the hand-eye rotation turns Pi_k.
 
 Estimator
 ---------
 Both the resolvers and the camera are noisy, so this is an errors-in-variables problem. We use
-weighted least squares with propagated noise (the *effective variance* estimator): each pose's three
-residuals Gamma_k get the covariance G_k Sigma_Vk G_k^T, with G_k = dGamma_k / dV_k the derivative
-with respect to that pose's measurements V_k = [Theta_k, Pi_k], and are whitened by its Cholesky
-factor. To first order in the noise this is the Gauss-Helmert maximum-likelihood estimator (it
-minimises the same Mahalanobis distance after eliminating the corrections to V_k) at a fraction of
-the cost, and its chi-square sum_k Gamma_k^T (G Sigma G^T)^-1 Gamma_k follows chi2(3K - p) when the
-model is right -- the statistic the residual loop tests. The covariance of U is (J_w^T J_w)^-1 with
-J_w the whitened observation matrix; evaluated at the true parameters it is the Cramer-Rao bound.
+weighted least squares with propagated noise (the *effective variance* estimator): each pose's
+three residuals Gamma_k get the covariance G_k Sigma_Vk G_k^T, with G_k = dGamma_k / dV_k the
+derivative with respect to that pose's measurements V_k = [Theta_k, Pi_k], and are whitened by its
+Cholesky factor. To first order in the noise this is the Gauss-Helmert maximum-likelihood
+estimator (it minimises the same Mahalanobis distance after eliminating the corrections to V_k) at
+a fraction of the cost, and its chi-square sum_k Gamma_k^T (G Sigma G^T)^-1 Gamma_k follows
+chi2(3K - p) when the model is right -- the statistic the residual loop tests. The covariance of U
+is (J_w^T J_w)^-1 with J_w the whitened observation matrix; evaluated at the true parameters it is
+the Cramer-Rao bound.
 """
 from dataclasses import dataclass, field
 
@@ -30,13 +33,16 @@ import numpy as np
 from robotenis_kinematics import delta, effects
 
 LEG_PARAMETERS = ('a', 'b', 'h', 'H', 'phi', 'theta0')
-PAPER_PARAMETERS = tuple(f'{p}{i}' for i in (1, 2, 3) for p in ('a', 'b', 'h', 'theta0')) + ('P0x', 'P0y', 'P0z')
-ALL_PARAMETERS = tuple(f'{p}{i}' for i in (1, 2, 3) for p in LEG_PARAMETERS) + ('P0x', 'P0y', 'P0z')
+PAPER_PARAMETERS = (tuple(f'{p}{i}' for i in (1, 2, 3) for p in ('a', 'b', 'h', 'theta0'))
+                    + ('P0x', 'P0y', 'P0z'))
+ALL_PARAMETERS = (tuple(f'{p}{i}' for i in (1, 2, 3) for p in LEG_PARAMETERS)
+                  + ('P0x', 'P0y', 'P0z'))
 
 
 @dataclass
 class Measurements:
-    """Incremental measurements of K poses and their noise.
+    """
+    Incremental measurements of K poses and their noise.
 
     Theta : (K, 3) resolver increments from home, rad.
     Pi : (K, 3) incremental effector positions in the base frame, m.
@@ -57,9 +63,10 @@ class Measurements:
         self.Pi = np.asarray(self.Pi, dtype=float)
         K = len(self.Theta)
         if self.Theta.shape != (K, 3) or self.Pi.shape != (K, 3):
-            raise ValueError(f"Theta and Pi must both be (K, 3); got {self.Theta.shape} and {self.Pi.shape}")
+            raise ValueError('Theta and Pi must both be (K, 3);'
+                             f' got {self.Theta.shape} and {self.Pi.shape}')
         if not (np.all(np.isfinite(self.Theta)) and np.all(np.isfinite(self.Pi))):
-            raise ValueError("measurements contain NaN or infinite values")
+            raise ValueError('measurements contain NaN or infinite values')
         self.sigma_Theta = np.broadcast_to(np.asarray(self.sigma_Theta, dtype=float), (K, 3))
         self.cov_Pi = np.broadcast_to(np.asarray(self.cov_Pi, dtype=float), (K, 3, 3))
         if self.direction is None:
@@ -69,26 +76,30 @@ class Measurements:
         return len(self.Theta)
 
     def subset(self, index):
-        """The measurements of the poses selected by ``index``."""
-        return Measurements(self.Theta[index], self.Pi[index], self.sigma_Theta[index], self.cov_Pi[index],
-                            self.direction[index])
+        """Return the measurements of the poses selected by ``index``."""
+        return Measurements(self.Theta[index], self.Pi[index], self.sigma_Theta[index],
+                            self.cov_Pi[index], self.direction[index])
 
 
 @dataclass
 class Model:
-    """A point in parameter space: a robot description, the camera reference position P0, and the
-    parameters of the effects in use (``effects.PARAMETERS``: name -> array of 3)."""
+    """
+    A point in parameter space.
+
+    A robot description, the camera reference position P0, and the parameters of the effects in
+    use (``effects.PARAMETERS``: name -> array of 3).
+    """
 
     desc: object
     P0: np.ndarray
     effects: dict = field(default_factory=dict)
 
     def get(self, names):
-        """Parameter vector U for the given parameter names (e.g. PAPER_PARAMETERS)."""
+        """Return the parameter vector U for the given parameter names (e.g. PAPER_PARAMETERS)."""
         return np.array([_get(self, n) for n in names])
 
     def with_values(self, names, U):
-        """A new Model with the named parameters set to U."""
+        """Return a new Model with the named parameters set to U."""
         desc = self.desc.copy()
         P0 = np.array(self.P0, dtype=float)
         fx = {k: np.array(v, dtype=float) for k, v in self.effects.items()}
@@ -116,8 +127,12 @@ def effect_names(effect):
 
 
 def _leg_geometry(model, meas):
-    """d_ik = C_ik - B_ik (K, 3, 3), theta_ik (K, 3), the effector positions P_k (K, 3), the
-    joint-effect derivatives dtheta_ik/d(effect parameter i) and e_i, de_i/dphi_i (3, 3)."""
+    """
+    Return the legs' geometry at every pose.
+
+    d_ik = C_ik - B_ik (K, 3, 3), theta_ik (K, 3), the effector positions P_k (K, 3), the
+    joint-effect derivatives dtheta_ik/d(effect parameter i) and e_i, de_i/dphi_i (3, 3).
+    """
     desc = model.desc
     Pi = effects.rotate_increments(model.effects, meas.Pi)
     P = model.P0 + Pi
@@ -135,11 +150,15 @@ def constraints(model, meas):
 
 
 def partials(model, meas):
-    """Derivatives of Gamma_ik, each (K, 3): with respect to leg i's own parameters
-    ('a', 'b', 'h', 'H', 'phi', 'theta0'), to the joint angle ('theta', equal to 'theta0'), to the
-    joint effects' parameter of joint i ('joint_scale', 'backlash', 'gravity_compliance'), and, shape
-    (K, 3, 3), to P0 = Pi ('P': dGamma_ik / dP_j) and to the hand-eye rotation vector
-    ('hand_eye_rotation': dGamma_ik / dr_j = 2 (Pi_k x d_ik)_j, small rotations)."""
+    """
+    Return the derivatives of Gamma_ik, keyed by parameter.
+
+    Each is (K, 3): with respect to leg i's own parameters ('a', 'b', 'h', 'H', 'phi', 'theta0'),
+    to the joint angle ('theta', equal to 'theta0'), to the joint effects' parameter of joint i
+    ('joint_scale', 'backlash', 'gravity_compliance'), and, shape (K, 3, 3), to P0 = Pi
+    ('P': dGamma_ik / dP_j) and to the hand-eye rotation vector
+    ('hand_eye_rotation': dGamma_ik / dr_j = 2 (Pi_k x d_ik)_j, small rotations).
+    """
     desc = model.desc
     d, theta, Pi, dtheta_fx, e, de = _leg_geometry(model, meas)
     d_e = np.einsum('kij,ij->ki', d, e)
@@ -163,7 +182,7 @@ def partials(model, meas):
 
 
 def observation_matrix(model, meas, names=PAPER_PARAMETERS, parts=None):
-    """The observation matrix J = dPhi/dU (3K, p) of eq. (7), rows ordered leg by leg as in eq. (5)."""
+    """Return the observation matrix J = dPhi/dU (3K, p) of eq. (7), rows leg by leg (eq. 5)."""
     parts = partials(model, meas) if parts is None else parts
     K = len(meas)
     J = np.zeros((3, K, len(names)))
@@ -182,7 +201,8 @@ def residual_covariance(meas, parts):
     """Covariance (K, 3, 3) of Gamma_k propagated from the noise of V_k = [Theta_k, Pi_k]."""
     g_theta = parts['theta'] * meas.sigma_Theta
     D = parts['P']
-    return np.einsum('ki,ij->kij', g_theta ** 2, np.eye(3)) + np.einsum('kia,kab,kjb->kij', D, meas.cov_Pi, D)
+    return (np.einsum('ki,ij->kij', g_theta ** 2, np.eye(3))
+            + np.einsum('kia,kab,kjb->kij', D, meas.cov_Pi, D))
 
 
 def whitening(meas, parts):
@@ -225,12 +245,13 @@ class Result:
 
     @property
     def std(self):
-        """Standard deviations of U (same order as names)."""
+        """Return the standard deviations of U (same order as names)."""
         return np.sqrt(np.diag(self.covariance))
 
 
 def initial_model(desc, meas):
-    """The paper's start U_0: nominal parameters and P0 from a nominal pose.
+    """
+    Return the paper's start U_0: nominal parameters and P0 from a nominal pose.
 
     P0 = mean_k (FK_nominal(theta0 + Theta_k) - Pi_k): every pose predicts the camera reference.
     """
@@ -239,9 +260,11 @@ def initial_model(desc, meas):
 
 
 def gauss_newton_paper(start, meas, names=PAPER_PARAMETERS, max_iterations=50, tol=1e-12):
-    """The paper's iteration U_(n+1) = U_n - J(U_n)^+ Phi(U_n) (eqs. 6-8), unweighted, pseudo-inverse.
+    """
+    Run the paper's iteration U_(n+1) = U_n - J(U_n)^+ Phi(U_n) (eqs. 6-8).
 
-    Returns the Result; its covariance assumes unit-variance Gamma (the paper weights nothing).
+    Unweighted, with the pseudo-inverse. Returns the Result; its covariance assumes unit-variance
+    Gamma (the paper weights nothing).
     """
     model, U = start, start.get(names)
     history = []
@@ -262,16 +285,19 @@ def gauss_newton_paper(start, meas, names=PAPER_PARAMETERS, max_iterations=50, t
 
 
 def identify(start, meas, names=PAPER_PARAMETERS, max_iterations=100, tol=1e-12, callback=None):
-    """Damped Gauss-Newton (Levenberg-Marquardt) on the whitened constraints; the default solver.
+    """
+    Identify by damped Gauss-Newton (Levenberg-Marquardt) on the whitened constraints.
 
-    Minimises chi2(U) = sum_k Gamma_k^T (G_k Sigma_k G_k^T)^-1 Gamma_k (effective variance; see the
-    module docstring). The weights are re-evaluated at every accepted step. Stops when the step is
-    below ``tol`` relative to the parameter scale or chi2 stops decreasing.
+    The default solver. Minimises chi2(U) = sum_k Gamma_k^T (G_k Sigma_k G_k^T)^-1 Gamma_k
+    (effective variance; see the module docstring). The weights are re-evaluated at every accepted
+    step. Stops when the step is below ``tol`` relative to the parameter scale or chi2 stops
+    decreasing.
 
     Returns
     -------
     Result
         with the covariance (J_w^T J_w)^-1 at the solution and chi2 with dof = 3K - p.
+
     """
     names = tuple(names)
     model, U = start, start.get(names)
@@ -309,7 +335,8 @@ def identify(start, meas, names=PAPER_PARAMETERS, max_iterations=100, tol=1e-12,
             converged = True
             break
     cov = np.linalg.inv(J.T @ J)
-    return Result(model, names, U, cov, float(cost), 3 * len(meas) - len(names), n, converged, history)
+    return Result(model, names, U, cov, float(cost), 3 * len(meas) - len(names), n, converged,
+                  history)
 
 
 def cramer_rao(true_model, meas, names=PAPER_PARAMETERS):

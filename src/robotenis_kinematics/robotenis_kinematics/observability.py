@@ -1,23 +1,24 @@
-"""Which parameters the measurements determine: QR with column pivoting of the observation matrix.
+"""
+Which parameters the measurements determine: QR with column pivoting of the observation matrix.
 
 The whitened observation matrix (identification.whitened_problem) is scaled by parameter units --
 1 mm for lengths, 1 mrad for angles (1 mrad turns the 1 m forearm by about 1 mm) -- so that its
 columns compare what a unit error of each parameter does to the constraints. Then:
 
-* rank: QR with column pivoting orders the parameters by how much each adds to what the previous ones
-  explain; |R_jj| below ``rtol`` times |R_11| means parameter j adds nothing (structurally
-  unidentifiable). The null space, put in reduced row-echelon form, names the combinations the data
-  cannot see (e.g. a change of H_i equal to a change of h_i: only H_i - h_i enters eq. 4).
-* weak: a parameter whose unit change moves the constraints less than a third as much as the median
-  parameter's (its scaled column norm) is reported weak -- identifiable in principle but, like phi_i,
-  the first to be swamped by noise and model error. The Cramer-Rao standard deviation says by how much.
+* rank: QR with column pivoting orders the parameters by how much each adds to what the previous
+  ones explain; |R_jj| below ``rtol`` times |R_11| means parameter j adds nothing (structurally
+  unidentifiable). The null space, put in reduced row-echelon form, names the combinations the
+  data cannot see (e.g. a change of H_i equal to a change of h_i: only H_i - h_i enters eq. 4).
+* weak: a parameter whose unit change moves the constraints less than a third as much as the
+  median parameter's (its scaled column norm) is reported weak -- identifiable in principle but,
+  like phi_i, the first to be swamped by noise and model error. The Cramer-Rao standard deviation
+  says by how much.
 """
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
-
 from robotenis_kinematics import identification
+import scipy.linalg
 
 WEAK_FRACTION = 1.0 / 3.0
 
@@ -28,7 +29,7 @@ def unit_scales(names):
 
 
 def is_angle(name):
-    """True for angle parameters (phi_i, theta_i0), whose unit is rad."""
+    """Return True for angle parameters (phi_i, theta_i0), whose unit is rad."""
     return name.startswith(('phi', 'theta'))
 
 
@@ -78,7 +79,7 @@ def _null_basis(Js, rtol):
 
 
 def analyse(model, meas, names=identification.ALL_PARAMETERS, rtol=1e-9):
-    """Observability of ``names`` for the poses in ``meas`` around ``model`` (see module docstring)."""
+    """Observability of ``names`` for the poses in ``meas`` at ``model`` (see module docstring)."""
     names = tuple(names)
     _, J_w = identification.whitened_problem(model, meas, names)
     Js = J_w * unit_scales(names)
@@ -86,36 +87,40 @@ def analyse(model, meas, names=identification.ALL_PARAMETERS, rtol=1e-9):
     r = np.abs(np.diag(R)) / abs(R[0, 0])
     rank = int(np.sum(r > rtol))
     dropped = tuple(names[j] for j in piv[rank:])
-    combos = [{names[j]: float(v) for j, v in enumerate(row) if v != 0.0} for row in _null_basis(Js, rtol)]
+    combos = [{names[j]: float(v) for j, v in enumerate(row) if v != 0.0}
+              for row in _null_basis(Js, rtol)]
     norms = np.linalg.norm(Js, axis=0)
     rel = norms / np.median(norms)
     sensitivity = dict(zip(names, rel))
     keep = [n for n in names if n not in dropped]
     weak = tuple(n for n in keep if sensitivity[n] < WEAK_FRACTION)
-    cov = np.linalg.inv(J_w[:, [names.index(n) for n in keep]].T @ J_w[:, [names.index(n) for n in keep]])
+    J_keep = J_w[:, [names.index(n) for n in keep]]
+    cov = np.linalg.inv(J_keep.T @ J_keep)
     std = dict(zip(keep, np.sqrt(np.diag(cov))))
-    return Observability(names, tuple(names[j] for j in piv), r, rank, dropped, combos, sensitivity, weak, std)
+    return Observability(names, tuple(names[j] for j in piv), r, rank, dropped, combos,
+                         sensitivity, weak, std)
 
 
 def describe_combination(combo):
-    """Text for one unseen direction: for two parameters changing together, the combination that is seen."""
+    """Describe one unseen direction: for two parameters moving together, the combination seen."""
     if len(combo) == 2:
         (n1, c1), (n2, c2) = combo.items()
         sign = '-' if c1 * c2 > 0 else '+'
-        return f"{n1} and {n2} enter only as {n2} {sign} {n1}"
+        return f'{n1} and {n2} enter only as {n2} {sign} {n1}'
     return 'no data constrain ' + ' + '.join(f'{c:.3g} {n}' for n, c in combo.items())
 
 
 def format_report(obs):
-    """A human-readable report of the analysis (mm and mrad)."""
-    lines = [f"Observability of {len(obs.names)} parameters: rank {obs.rank} "
-             f"(QR with column pivoting, units 1 mm / 1 mrad)"]
+    """Return a human-readable report of the analysis (mm and mrad)."""
+    lines = [f'Observability of {len(obs.names)} parameters: rank {obs.rank} '
+             f'(QR with column pivoting, units 1 mm / 1 mrad)']
     for combo in obs.combinations:
         lines.append('  unidentifiable: ' + describe_combination(combo))
-    lines.append(f"  weak (sensitivity < {WEAK_FRACTION:.2f} of the median): " + (', '.join(obs.weak) or 'none'))
+    lines.append(f'  weak (sensitivity < {WEAK_FRACTION:.2f} of the median): '
+                 + (', '.join(obs.weak) or 'none'))
     lines.append('  %-8s %12s %14s' % ('param', 'sensitivity', 'CRB std'))
     for n in obs.names:
         unit, k = ('mrad', 1e3) if is_angle(n) else ('mm', 1e3)
-        std = f"{obs.std[n] * k:9.4f} {unit}" if n in obs.std else '   (dropped)'
+        std = f'{obs.std[n] * k:9.4f} {unit}' if n in obs.std else '   (dropped)'
         lines.append('  %-8s %12.2f %14s' % (n, obs.sensitivity[n], std))
     return '\n'.join(lines)

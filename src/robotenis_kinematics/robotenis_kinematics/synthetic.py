@@ -1,4 +1,5 @@
-"""Synthetic incremental measurements for identification studies (design, tests, benchmarks).
+"""
+Synthetic incremental measurements for identification studies (design, tests, benchmarks).
 
 Given a geometry taken as true and the effector positions visited, it produces what the resolvers
 and the hand camera would report, with the paper's noise. It knows nothing of unmodelled effects:
@@ -14,7 +15,8 @@ from robotenis_kinematics.identification import Measurements, Model
 
 @dataclass(frozen=True)
 class NoiseModel:
-    """Noise of one averaged measurement.
+    """
+    Noise of one averaged measurement.
 
     sigma_camera : standard deviation along the optical axes x, y, z (m) of the sphere position
         averaged over 500 frames; default the paper's Table 3 (0.0025, 0.0049, 0.0212 mm).
@@ -33,12 +35,13 @@ class NoiseModel:
 
 
 def true_model(desc):
-    """The Model whose camera reference P0 is the home position FK(theta0)."""
+    """Return the Model whose camera reference P0 is the home position FK(theta0)."""
     return Model(desc.copy(), delta.forward(desc, desc.theta0))
 
 
 def measure(true_desc, P, noise=NoiseModel(), rng=None):
-    """Measurements (Theta_k, Pi_k) of the positions P (K, 3) on a robot of geometry ``true_desc``.
+    """
+    Measurements (Theta_k, Pi_k) of the positions P (K, 3) on a robot of geometry ``true_desc``.
 
     Theta_k = IK(P_k) - theta0 and Pi_k = P_k - P0 with P0 = FK(theta0), the home position, plus
     independent Gaussian noise when ``rng`` is given (noise-free otherwise). The covariances in the

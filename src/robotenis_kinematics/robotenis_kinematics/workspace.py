@@ -1,9 +1,10 @@
-"""Sampling the Delta robot's workspace, and the paper's calibration poses near its boundary.
+"""
+Sampling the Delta robot's workspace, and the paper's calibration poses near its boundary.
 
 The usable workspace is where every leg reaches (eq. 1 has a solution), the arm angles stay inside
-the drives' range, the forearms are away from the parallel singularity, and the effector is inside a
-vertical cylinder below the base. Calibration poses (paper, section 5.1) are drawn at random from the
-shell 5-10 cm from a serial singularity.
+the drives' range, the forearms are away from the parallel singularity, and the effector is inside
+a vertical cylinder below the base. Calibration poses (paper, section 5.1) are drawn at random from
+the shell 5-10 cm from a serial singularity.
 """
 from dataclasses import dataclass
 
@@ -29,7 +30,8 @@ class Workspace:
         inside = (np.hypot(P[..., 0], P[..., 1]) <= self.radius) & (P[..., 2] >= self.z_min) \
             & (P[..., 2] <= self.z_max)
         theta, reach = delta._inverse(desc, P)
-        ok = inside & np.all(reach, axis=-1) & np.all((theta >= self.theta_min) & (theta <= self.theta_max), axis=-1)
+        in_range = (theta >= self.theta_min) & (theta <= self.theta_max)
+        ok = inside & np.all(reach, axis=-1) & np.all(in_range, axis=-1)
         cond = np.zeros(ok.shape)
         if np.any(ok):
             cond[ok] = delta.parallel_conditioning(desc, P[ok], theta[ok])
@@ -37,13 +39,25 @@ class Workspace:
 
 
 def sample(desc, n, rng, workspace=Workspace(), band=None, batch=4096):
-    """Draw ``n`` positions (n, 3) uniformly from the usable workspace.
+    """
+    Draw ``n`` positions (n, 3) uniformly from the usable workspace.
 
     Parameters
     ----------
+    desc : RobotDescription
+        The robot whose workspace is sampled.
+    n : int
+        Number of positions returned.
+    rng : numpy.random.Generator
+        Source of the random draws.
+    workspace : Workspace
+        Bounds of the region sampled.
     band : (float, float) or None
         If given, keep only positions whose distance to the nearest serial singularity
         (``delta.singularity_distance``) lies in [band[0], band[1]] m: the paper's 5-10 cm shell.
+    batch : int
+        Candidate positions drawn per round.
+
     """
     out = []
     count = 0
@@ -62,5 +76,5 @@ def sample(desc, n, rng, workspace=Workspace(), band=None, batch=4096):
 
 
 def boundary_poses(desc, n, rng, workspace=Workspace(), band=(0.05, 0.10)):
-    """The paper's calibration poses: random, 5-10 cm from a singularity (section 5.1)."""
+    """Draw the paper's calibration poses: random, 5-10 cm from a singularity (section 5.1)."""
     return sample(desc, n, rng, workspace, band=band)

@@ -45,18 +45,20 @@ def test_jacobian_matches_finite_differences(table1, poses):
     for j in range(3):
         dt = np.zeros(3)
         dt[j] = eps
-        Jn[:, :, j] = (delta.forward(table1, theta + dt) - delta.forward(table1, theta - dt)) / (2 * eps)
+        Jn[:, :, j] = ((delta.forward(table1, theta + dt) - delta.forward(table1, theta - dt))
+                       / (2 * eps))
     # Central differences: truncation ~ eps^2 |d3P|, rounding ~ 1e-16 / eps.
     assert np.abs(J - Jn).max() < 1e-8
-    np.testing.assert_allclose(delta.inverse_jacobian(table1, P, theta) @ J, np.broadcast_to(np.eye(3), J.shape),
-                               atol=1e-10)
+    np.testing.assert_allclose(delta.inverse_jacobian(table1, P, theta) @ J,
+                               np.broadcast_to(np.eye(3), J.shape), atol=1e-10)
 
 
 def test_singularity_distance_is_metric(nominal):
     # Put C_1 on the line of leg 1's arm, at a + b - s from A_1: the leg is s short of stretched,
     # and its margin must be exactly s.
     theta1 = 0.6
-    B = np.array([nominal.H[0] + nominal.a[0] * np.cos(theta1), 0.0, nominal.a[0] * np.sin(theta1)])
+    B = np.array([nominal.H[0] + nominal.a[0] * np.cos(theta1), 0.0,
+                  nominal.a[0] * np.sin(theta1)])
     direction = np.array([np.cos(theta1), 0.0, np.sin(theta1)])
     for s in (0.0, 0.02, 0.05):
         C = B + (nominal.b[0] - s) * direction  # inside: leg 1 folded back by s along the line

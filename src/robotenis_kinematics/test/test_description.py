@@ -2,10 +2,9 @@ import math
 
 import numpy as np
 import pytest
-import yaml
-
 from robotenis_kinematics import description
 from robotenis_kinematics.description import DescriptionError
+import yaml
 
 
 def nominal_dict():
@@ -43,11 +42,14 @@ def test_round_trip(tmp_path, nominal):
     (lambda d: d['legs'][0].__setitem__('a', math.inf), 'legs[0].a: must be finite'),
     (lambda d: d['legs'][0].__setitem__('a', True), 'legs[0].a: expected a number'),
     (lambda d: d['camera'].pop('rotation'), 'camera.rotation: missing key'),
-    (lambda d: d['camera'].__setitem__('rotation', [[1, 0, 0], [0, 1, 0]]), 'camera.rotation: expected 3 rows'),
-    (lambda d: d['camera'].__setitem__('rotation', [[2, 0, 0], [0, 1, 0], [0, 0, 1]]), 'camera.rotation: not a rotation'),
+    (lambda d: d['camera'].__setitem__('rotation', [[1, 0, 0], [0, 1, 0]]),
+     'camera.rotation: expected 3 rows'),
+    (lambda d: d['camera'].__setitem__('rotation', [[2, 0, 0], [0, 1, 0], [0, 0, 1]]),
+     'camera.rotation: not a rotation'),
     (lambda d: d['camera'].__setitem__('frame_id', 3), 'camera.frame_id'),
     (lambda d: d.__setitem__('sphere_radius', -0.01), 'sphere_radius: must be positive'),
-    (lambda d: d.__setitem__('effects', [{'name': 'warp_drive'}]), "effects[0].name: unknown effect 'warp_drive'"),
+    (lambda d: d.__setitem__('effects', [{'name': 'warp_drive'}]),
+     "effects[0].name: unknown effect 'warp_drive'"),
 ])
 def test_bad_descriptions_name_the_key(edit, key):
     data = nominal_dict()

@@ -23,4 +23,5 @@ def test_increments_for_inverts_the_model_joint_angles():
 def test_without_effects_the_increments_are_the_angles_from_home():
     desc = description.nominal()
     theta = delta.inverse(desc, [0.05, 0.02, 0.95])
-    np.testing.assert_allclose(effects.increments_for(desc, theta, np.ones(3), None), theta - desc.theta0)
+    np.testing.assert_allclose(effects.increments_for(desc, theta, np.ones(3), None),
+                               theta - desc.theta0)

@@ -1,9 +1,8 @@
 import numpy as np
 import pytest
-from scipy import stats
-
 from robotenis_kinematics import identification as idf
 from robotenis_kinematics import observability, synthetic, workspace
+from scipy import stats
 
 LEVEL = 0.01  # two-sided significance of the chi-square tests
 
@@ -61,8 +60,10 @@ def test_covariance_at_the_truth_is_the_cramer_rao_bound(nominal, table1, design
     meas = synthetic.measure(table1, design, rng=np.random.default_rng(5))
     result = idf.identify(idf.initial_model(nominal, meas), meas)
     crb = idf.cramer_rao(synthetic.true_model(table1), meas)
-    # The estimate's covariance is evaluated at the estimate, a few CRB std away: equal to first order.
-    np.testing.assert_allclose(np.sqrt(np.diag(result.covariance)), np.sqrt(np.diag(crb)), rtol=1e-3)
+    # The estimate's covariance is evaluated at the estimate, a few CRB std away: equal to first
+    # order.
+    np.testing.assert_allclose(np.sqrt(np.diag(result.covariance)), np.sqrt(np.diag(crb)),
+                               rtol=1e-3)
 
 
 def test_observability_finds_H_minus_h_and_weak_phi(table1, design):
