@@ -88,7 +88,7 @@ def camera_figure(frames=200, target_ms=4.0):
     cam, rng = camera.default(), np.random.default_rng(1)
     centres = [np.array([0.02 * np.sin(k), 0.015 * np.cos(k), 0.15 + 0.45 * (k % 10) / 9])
                for k in range(frames)]
-    camera_model.render(cam, centres[0], 0.0095, rng)  # builds the per-camera caches
+    camera_model.render(cam, centres[0], 0.019, rng)  # builds the per-camera caches
 
     def run(fn, items):
         wall, cpu = [], time.process_time()
@@ -104,7 +104,7 @@ def camera_figure(frames=200, target_ms=4.0):
         frame += 2.0 * rng.standard_normal(frame.shape, dtype=np.float32)
         return np.clip(cv2.GaussianBlur(frame, (0, 0), 0.8), 0, 255).astype(np.uint8)
 
-    cpu, med, low = run(lambda c: camera_model.render(cam, c, 0.0095, rng), centres)
+    cpu, med, low = run(lambda c: camera_model.render(cam, c, 0.019, rng), centres)
     base = run(floor, centres[:frames // 4])[0]
     print(f'hand camera render: {cpu:.2f} ms CPU per 640x480 frame '
           f'(wall median {med:.2f}, minimum {low:.2f}; '

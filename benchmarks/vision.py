@@ -1,9 +1,10 @@
 """
 Benchmark: measuring the sphere in hand-camera images (issue 4).
 
-Images come from the simulator's renderer (robotenis_sim.camera_model) with known truth: the 19 mm
-ball, shaded with a light and a glossy highlight, on a gradient + textured background, blurred,
-with sensor noise, through the default hand camera (640x480, f = 500 px, plumb_bob distortion).
+Images come from the simulator's renderer (robotenis_sim.camera_model) with known truth: the
+paper's ball (R_B = 19 mm), shaded with a light and a glossy highlight, on a gradient + textured
+background, blurred, with sensor noise, through the default hand camera (640x480, f = 500 px,
+plumb_bob distortion).
 
 1. Accuracy at 200 mm in the image centre, single frames (the paper's Table 2 setting): bias and
    precision separately, per axis, for the four methods. Targets: lateral < 0.02 mm, depth < 0.1 mm
@@ -31,7 +32,7 @@ from robotenis_sim import camera_model as cm  # noqa: E402
 from robotenis_vision import camera, detector  # noqa: E402
 
 cv2.setNumThreads(1)
-R = 0.0095
+R = 0.019                       # m: the paper's ball radius R_B
 CAM = camera.default()
 METHODS = ('conic', 'paper', 'tangent', 'baseline')  # tangent: the paper's eqs. 9-16 without 17-22
 # std, range (mm), 50 samples

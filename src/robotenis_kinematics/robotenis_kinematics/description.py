@@ -8,7 +8,7 @@ Schema (SI units, REP-103)::
     camera:
       frame_id: camera_optical
       rotation: [[0, 0, 1], [1, 0, 0], [0, 1, 0]]  # columns: optical x, y, z in the effector frame
-    sphere_radius: 0.0095
+    sphere_radius: 0.019        # m: the paper's R_B = 19 mm (38 mm across)
     effects: []            # optional: effects found by calibration (robotenis_kinematics.effects)
     report: {}             # optional: free-form, written by calibration, ignored by the model
 
@@ -48,7 +48,7 @@ class RobotDescription:
     theta0: np.ndarray
     camera_rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
     camera_frame_id: str = 'camera_optical'
-    sphere_radius: float = 0.0095
+    sphere_radius: float = 0.019
     effects: list = field(default_factory=list)
     report: dict = field(default_factory=dict)
 

@@ -113,7 +113,7 @@ def plan(spec, batch=4000):
         candidates = workspace.boundary_poses(declared, batch, rng)
         P_true = static_session.rest_positions(truth, declared, candidates)[1]
         seen = static_session.visible(static_session.sphere_in_camera(truth, P_true),
-                                      radius=truth.geometry.sphere_radius)
+                                      truth.geometry.sphere_radius)
         P = np.concatenate([P, candidates[seen]])
     Theta, P_true = static_session.rest_positions(truth, declared, P[:spec.poses])
     return declared, Theta, static_session.sphere_in_camera(truth, P_true)

@@ -24,7 +24,7 @@ RANGE = (0.15, 0.60)   # m, along the optical axis, where the detector is specif
 MARGIN_PX = 40         # keep the ball's image this far inside the frame
 
 
-def visible(sphere, camera=DEFAULT_CAMERA, radius=0.0095):
+def visible(sphere, radius, camera=DEFAULT_CAMERA):
     """Return the mask (K,) of sphere centres (optical frame, m) the camera sees whole in range."""
     x, y, z = np.asarray(sphere, dtype=float).T
     ok = (z >= RANGE[0]) & (z <= RANGE[1])
@@ -59,7 +59,8 @@ def run(truth, declared, P_cmd, noise, rng, camera=DEFAULT_CAMERA):
     """
     P_cmd = np.asarray(P_cmd, dtype=float)
     P_rest = rest_positions(truth, declared, P_cmd)[1]
-    kept = np.flatnonzero(visible(sphere_in_camera(truth, P_rest), camera))
+    kept = np.flatnonzero(visible(sphere_in_camera(truth, P_rest), truth.geometry.sphere_radius,
+                                  camera))
     # Visit only what the camera sees: the motion directions follow the poses actually visited.
     Theta, P = rest_positions(truth, declared, P_cmd[kept])
     sphere = sphere_in_camera(truth, P)

@@ -6,7 +6,7 @@ from robotenis_sim import camera_model as cm, truth as sim_truth
 from robotenis_vision import camera, detector
 from scipy.stats import chi2
 
-R = 0.0095
+R = 0.019                       # m: the paper's ball radius R_B
 CAM = camera.default()
 WHITE = cm.Lighting(ambient=255.0, diffuse=0.0, specular=0.0)
 BLACK = cm.Background(low=0.0, high=0.0, texture=0.0)

@@ -14,8 +14,9 @@ steps).
 
 Calibration files are the ROS camera_info YAML that camera_calibration_parsers reads and writes.
 The default camera (``default()``, ``config/hand_camera.yaml``) resembles the paper's: 640x480 and
-f = 500 px, i.e. the paper's "0.4 mm per pixel" at 200 mm (section 6.1). The 19 mm ball then spans
-63 px at 150 mm and 16 px at 600 mm, the range the detector is specified for.
+f = 500 px, i.e. the paper's "0.4 mm per pixel" at 200 mm (section 6.1). The paper's ball
+(R_B = 19 mm) then spans 127 px at 150 mm and 32 px at 600 mm, the range the detector is
+specified for.
 """
 from dataclasses import dataclass, field
 import os

@@ -5,7 +5,7 @@ from robotenis_vision import conic
 from robotenis_vision.conic import ConicError
 from scipy.stats import chi2
 
-R = 0.0095
+R = 0.019                       # m: the paper's ball radius R_B
 F = 500.0
 
 

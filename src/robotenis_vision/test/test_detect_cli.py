@@ -8,7 +8,7 @@ import numpy as np
 from robotenis_vision import camera
 import simple_render
 
-R = 0.0095
+R = 0.019                       # m: the paper's ball radius R_B
 CENTRES = [np.array([0.02, -0.01, 0.22]), np.array([-0.04, 0.03, 0.3])]
 
 

@@ -14,7 +14,7 @@ from robotenis_vision.detector import DetectionError
 from scipy.stats import chi2
 import simple_render
 
-R = 0.0095
+R = 0.019                       # m: the paper's ball radius R_B
 RESOLUTION_PX = 0.02
 CAM = camera_model_vision.default()
 

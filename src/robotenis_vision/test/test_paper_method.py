@@ -6,7 +6,7 @@ from robotenis_vision import paper_method
 from robotenis_vision.paper_method import PaperMethodError
 from test_conic import outline_xy
 
-R = 0.0095
+R = 0.019                       # m: the paper's ball radius R_B
 
 
 def error(c, iterations):
@@ -26,11 +26,13 @@ def test_the_ellipse_correction_removes_most_of_the_chord_error(c):
     """
     Off both axes the chords through the centre are not the tangent points: eqs. 17-22 fix that.
 
-    (The paper: a second iteration brings no appreciable improvement.)
+    The correction is first order: what it leaves grows as (R/d)^2, 9 % of the chord error for the
+    paper's ball at 200 mm and 60 mm off the axis (R/d = 0.09), 0.1-2 % farther away. (The paper:
+    a second iteration brings no appreciable improvement.)
     """
     c = np.array(c)
     raw, once, twice = error(c, 0), error(c, 1), error(c, 2)
-    assert once < 0.05 * raw
+    assert once < 0.1 * raw
     assert abs(twice - once) < 0.1 * once + 1e-9
 
 
