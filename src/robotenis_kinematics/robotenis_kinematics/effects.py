@@ -12,15 +12,31 @@ deviation::
     - {name: hand_eye_rotation, rotation_vector: [rx, ry, rz], rotation_vector_std: [...]}
     - {name: base_geometry, phi: [...], phi_std: [...], H: [...], H_std: [...]}
 
+and the two generic effects, for what no named effect explains, each a family of terms with one
+parameter per joint or per optical axis::
+
+    - {name: joint_harmonics, terms: {cos5: [...], sin5: [...]}, terms_std: {...}}
+    - {name: camera_field, reference_range: 0.35, terms: {w: [...], uu: [...]}, terms_std: {...}}
+
 The joint effects turn resolver increments Theta into arm angles (model of the residual loop):
 
     theta = theta0 + (1 + k) Theta - (w / 2) dir + c tau_g(P, theta0 + Theta)
 
-with dir the sign of the joint's last motion (the arm lags the motor by half the backlash width)
-and tau_g the gravity torque on the arm (positive down) of a robot with the declared gravity load.
-The hand-eye rotation r turns the camera's measured increments: Pi_true = exp([r]x) Pi.
-base_geometry is applied in the legs' phi and H themselves; its entry records what was identified.
+                                                + sum_n (c_n cos(n t) + s_n sin(n t))
+
+with dir the sign of the joint's last motion (the arm lags the motor by half the backlash width),
+tau_g the gravity torque on the arm (positive down) of a robot with the declared gravity load and
+t = theta0 + Theta: the joint harmonics are errors that repeat with the joint's angle (an
+eccentric gear or resolver). The camera-side effects correct the measured sphere centre s
+(optical frame) before it becomes an increment, Pi = -R s (R the declared camera rotation): the
+camera field is a polynomial error of the measurement, s_measured = s + sum_m f_m phi_m(s), with
+monomials phi_m in u = x / z, v = y / z and w = z / z_ref - 1 (z_ref = ``reference_range``), so
+Pi_true = -R (s - sum_m f_m phi_m(s)); the hand-eye rotation r then turns the increments:
+Pi_true = exp([r]x) Pi. base_geometry is applied in the legs' phi and H themselves; its entry
+records what was identified.
 """
+import re
+
 import numpy as np
 
 from robotenis_kinematics import delta
@@ -40,7 +56,59 @@ PARAMETERS = {
     'hand_eye_rotation': ('rotation_vector', 1e-3),  # rad
 }
 BASE_GEOMETRY_KEYS = ('phi', 'H')
-MODELS = tuple(PARAMETERS) + ('base_geometry',)
+GENERIC = ('joint_harmonics', 'camera_field')
+MODELS = tuple(PARAMETERS) + ('base_geometry',) + GENERIC
+JOINT_NAMED = ('joint_scale', 'backlash', 'gravity_compliance')
+# Generic terms in a model: 'joint_cos5' is joint_harmonics' cos5, 'camera_uw' camera_field's uw
+JOINT_TERM = re.compile(r'^joint_(cos|sin)([1-9][0-9]*)$')
+CAMERA_TERM = re.compile(r'^camera_([uvw]+)$')
+TERM_UNIT = 1e-4          # rad or m: the observability scale of a generic term
+CAMERA_REFERENCE_RANGE = 0.35    # m: the camera field's z_ref, mid-range of the planned poses
+
+
+def is_effect(name):
+    """Return whether ``name`` is an effect a model can carry: named, or a generic term."""
+    return name in PARAMETERS or bool(JOINT_TERM.match(name) or CAMERA_TERM.match(name))
+
+
+def is_joint_effect(name):
+    """Return whether an effect acts between the joint and its reading (FK applies it)."""
+    return name in JOINT_NAMED or bool(JOINT_TERM.match(name))
+
+
+def is_camera_term(name):
+    """Return whether ``name`` is a camera-field term."""
+    return bool(CAMERA_TERM.match(name))
+
+
+def joint_term_names(orders):
+    """Return the term names of the joint harmonics of the given orders n."""
+    return tuple(f'joint_{kind}{n}' for n in orders for kind in ('cos', 'sin'))
+
+
+def camera_term_names(degree):
+    """Return the camera-field monomials up to ``degree`` in u, v, w (no constant term)."""
+    names = []
+    for d in range(1, degree + 1):
+        names += [''.join(m) for m in _monomials('uvw', d)]
+    return tuple(f'camera_{m}' for m in names)
+
+
+def _monomials(letters, degree):
+    if degree == 0:
+        return [()]
+    return [(letters[i],) + rest for i in range(len(letters))
+            for rest in _monomials(letters[i:], degree - 1)]
+
+
+def camera_basis(name, sphere):
+    """Return the monomial phi_m of a camera-field term at sphere centres (K, 3): (K,)."""
+    x, y, z = np.asarray(sphere, dtype=float).T
+    values = {'u': x / z, 'v': y / z, 'w': z / CAMERA_REFERENCE_RANGE - 1}
+    out = np.ones(len(z))
+    for letter in CAMERA_TERM.match(name).group(1):
+        out = out * values[letter]
+    return out
 
 
 def _three(value, key):
@@ -56,6 +124,9 @@ def validate(effect, where):
     if name not in MODELS:
         known = ', '.join(MODELS)
         raise DescriptionError(f'{where}.name: unknown effect {name!r} (known: {known})')
+    if name in GENERIC:
+        _validate_generic(effect, where)
+        return
     keys = BASE_GEOMETRY_KEYS if name == 'base_geometry' else (PARAMETERS[name][0],)
     for key in keys:
         if key not in effect and name != 'base_geometry':
@@ -69,10 +140,37 @@ def validate(effect, where):
                 raise DescriptionError(f'{where}.gravity_load.{part}: expected a number (kg)')
 
 
+def _validate_generic(effect, where):
+    terms = effect.get('terms')
+    if not isinstance(terms, dict) or not terms:
+        raise DescriptionError(f'{where}.terms: expected a map of terms to three numbers')
+    pattern = JOINT_TERM if effect['name'] == 'joint_harmonics' else CAMERA_TERM
+    prefix = 'joint_' if effect['name'] == 'joint_harmonics' else 'camera_'
+    for term, value in terms.items():
+        if not pattern.match(prefix + str(term)):
+            raise DescriptionError(f'{where}.terms.{term}: not a term of {effect["name"]}')
+        _three(value, f'{where}.terms.{term}')
+    if effect['name'] == 'camera_field':
+        reference = effect.get('reference_range')
+        if reference != CAMERA_REFERENCE_RANGE:
+            raise DescriptionError(f'{where}.reference_range: expected '
+                                   f'{CAMERA_REFERENCE_RANGE} m, got {reference!r}')
+
+
 def parameters(desc):
-    """Return a description's effect parameters as {name: array of 3} (base_geometry excluded)."""
-    return {e['name']: np.asarray(e[PARAMETERS[e['name']][0]], dtype=float)
-            for e in desc.effects if e['name'] in PARAMETERS}
+    """
+    Return a description's effect parameters as {name: array of 3} (base_geometry excluded).
+
+    A generic effect gives one entry per term ('joint_cos5', 'camera_w').
+    """
+    out = {}
+    for e in desc.effects:
+        if e['name'] in PARAMETERS:
+            out[e['name']] = np.asarray(e[PARAMETERS[e['name']][0]], dtype=float)
+        elif e['name'] in GENERIC:
+            prefix = 'joint_' if e['name'] == 'joint_harmonics' else 'camera_'
+            out.update({prefix + t: np.asarray(v, dtype=float) for t, v in e['terms'].items()})
+    return out
 
 
 def gravity_load(desc):
@@ -120,6 +218,11 @@ def model_joint_angles(desc, fx, Theta, direction, P, load=None):
     """
     base = desc.theta0 + Theta
     derivative = {}
+    for name in fx:
+        term = JOINT_TERM.match(name)
+        if term:
+            wave = np.cos if term.group(1) == 'cos' else np.sin
+            derivative[name] = wave(int(term.group(2)) * base)
     if 'joint_scale' in fx:
         derivative['joint_scale'] = Theta
     if 'backlash' in fx:
@@ -138,19 +241,21 @@ def increments_for(desc, theta, direction, P):
     robot with a calibrated model.
 
     ``direction`` is the sign of each joint's motion into this pose and P the effector position
-    (for compliance). Theta = (theta - theta0 + w/2 dir - c tau_g(P, theta0 + Theta)) / (1 + k),
-    solved by fixed point: the sag changes by c dtau/dtheta ~ 1e-3 of a step, so three passes are
-    exact.
+    (for compliance). With h the joint harmonics,
+    Theta = (theta - theta0 + w/2 dir - c tau_g(P, theta0 + Theta) - h(theta0 + Theta)) / (1 + k),
+    solved by fixed point: the sag and the harmonics change by 1e-3 of a step or less, so three
+    passes are exact.
     """
     fx = parameters(desc)
     k = fx.get('joint_scale', np.zeros(3))
     lead = theta - desc.theta0 + 0.5 * fx.get('backlash', np.zeros(3)) * direction
     Theta = lead / (1 + k)
-    if 'gravity_compliance' in fx:
-        for _ in range(3):
-            torque = gravity_torque(desc, P, desc.theta0 + Theta, gravity_load(desc))
-            sag = fx['gravity_compliance'] * torque
-            Theta = (lead - sag) / (1 + k)
+    implicit = {name: v for name, v in fx.items()
+                if name == 'gravity_compliance' or JOINT_TERM.match(name)}
+    for _ in range(3 if implicit else 0):
+        _, derivative = model_joint_angles(desc, implicit, Theta, direction, P, gravity_load(desc))
+        shift = sum(implicit[name] * d for name, d in derivative.items())
+        Theta = (lead - shift) / (1 + k)
     return Theta
 
 
@@ -165,8 +270,18 @@ def rotation_vector_matrix(r):
     return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
 
 
-def rotate_increments(fx, Pi):
-    """Return the measured increments turned by the hand-eye rotation, if the model has one."""
+def camera_increments(fx, Pi, R):
+    """
+    Return the increments the camera-side effects of ``fx`` give for the measured ones (K, 3).
+
+    The camera field's error is removed from the sphere centre s = -R^T Pi, then the hand-eye
+    rotation turns the result (see the module docstring); R is the declared camera rotation.
+    """
+    terms = [name for name in fx if CAMERA_TERM.match(name)]
+    if terms:
+        sphere = -np.asarray(Pi, dtype=float) @ np.asarray(R)
+        error = sum(np.outer(camera_basis(name, sphere), fx[name]) for name in terms)
+        Pi = Pi + error @ np.asarray(R).T
     if 'hand_eye_rotation' not in fx:
         return Pi
     return Pi @ rotation_vector_matrix(fx['hand_eye_rotation']).T
@@ -182,7 +297,7 @@ def joint_angles(desc, Theta):
     Theta = np.asarray(Theta, dtype=float).reshape(-1, 3)
     fx = parameters(desc)
     direction = motion_direction(Theta)
-    joint_fx = {k: v for k, v in fx.items() if k in ('joint_scale', 'backlash')}
+    joint_fx = {k: v for k, v in fx.items() if is_joint_effect(k) and k != 'gravity_compliance'}
     theta, _ = model_joint_angles(desc, joint_fx, Theta, direction, None)
     if 'gravity_compliance' not in fx:
         return theta

@@ -106,7 +106,7 @@ class Model:
         for n, u in zip(names, U):
             if n.startswith('P0'):
                 P0['xyz'.index(n[2])] = u
-            elif n[:-1] in effects.PARAMETERS:
+            elif effects.is_effect(n[:-1]):
                 fx.setdefault(n[:-1], np.zeros(3))[int(n[-1]) - 1] = u
             else:
                 getattr(desc, n[:-1])[int(n[-1]) - 1] = u
@@ -116,7 +116,7 @@ class Model:
 def _get(model, name):
     if name.startswith('P0'):
         return model.P0['xyz'.index(name[2])]
-    if name[:-1] in effects.PARAMETERS:
+    if effects.is_effect(name[:-1]):
         return model.effects.get(name[:-1], np.zeros(3))[int(name[-1]) - 1]
     return getattr(model.desc, name[:-1])[int(name[-1]) - 1]
 
@@ -134,7 +134,7 @@ def _leg_geometry(model, meas):
     joint-effect derivatives dtheta_ik/d(effect parameter i) and e_i, de_i/dphi_i (3, 3).
     """
     desc = model.desc
-    Pi = effects.rotate_increments(model.effects, meas.Pi)
+    Pi = effects.camera_increments(model.effects, meas.Pi, desc.camera_rotation)
     P = model.P0 + Pi
     theta, dtheta = effects.model_joint_angles(desc, model.effects, meas.Theta, meas.direction, P)
     d = delta.effector_joints(desc, P) - delta.elbow_points(desc, theta)
@@ -156,8 +156,10 @@ def partials(model, meas):
     Each is (K, 3): with respect to leg i's own parameters ('a', 'b', 'h', 'H', 'phi', 'theta0'),
     to the joint angle ('theta', equal to 'theta0'), to the joint effects' parameter of joint i
     ('joint_scale', 'backlash', 'gravity_compliance'), and, shape (K, 3, 3), to P0 = Pi
-    ('P': dGamma_ik / dP_j) and to the hand-eye rotation vector
-    ('hand_eye_rotation': dGamma_ik / dr_j = 2 (Pi_k x d_ik)_j, small rotations).
+    ('P': dGamma_ik / dP_j), to the hand-eye rotation vector
+    ('hand_eye_rotation': dGamma_ik / dr_j = 2 (Pi_k x d_ik)_j, small rotations) and to each
+    camera-field term's coefficients along the optical axes (dGamma_ik / df_a =
+    2 phi(s_k) d_ik . R e_a, to first order in the field).
     """
     desc = model.desc
     d, theta, Pi, dtheta_fx, e, de = _leg_geometry(model, meas)
@@ -178,6 +180,12 @@ def partials(model, meas):
         'hand_eye_rotation': 2 * np.cross(Pi[:, None, :], d),
     }
     out.update({name: dtheta * dt for name, dt in dtheta_fx.items()})
+    R = desc.camera_rotation
+    sphere = -meas.Pi @ R
+    for name in model.effects:
+        if effects.is_camera_term(name):
+            phi = effects.camera_basis(name, sphere)
+            out[name] = 2 * phi[:, None, None] * np.einsum('kij,ja->kia', d, R)
     return out
 
 
@@ -189,8 +197,8 @@ def observation_matrix(model, meas, names=PAPER_PARAMETERS, parts=None):
     for col, n in enumerate(names):
         if n.startswith('P0'):
             J[:, :, col] = parts['P'][:, :, 'xyz'.index(n[2])].T
-        elif n.startswith('hand_eye_rotation'):
-            J[:, :, col] = parts['hand_eye_rotation'][:, :, int(n[-1]) - 1].T
+        elif n.startswith('hand_eye_rotation') or effects.is_camera_term(n[:-1]):
+            J[:, :, col] = parts[n[:-1]][:, :, int(n[-1]) - 1].T
         else:
             i = int(n[-1]) - 1
             J[i, :, col] = parts[n[:-1]][:, i]
