@@ -3,8 +3,8 @@ The error each rest carries beyond its frames' spread, learned from the data (RE
 
 Averaging N frames of a rest shrinks the camera's frame-to-frame noise by sqrt(N), but not what
 the detector gets wrong at that pose, a vibration of the ball's holder or a resolver's systematic
-error: each rest has an error of its own. Its variance (the *floor*) is a sum of components added to the
-covariances of every rest's measurements:
+error: each rest has an error of its own. Its variance (the *floor*) is a sum of components added
+to the covariances of every rest's measurements:
 
 * ``camera_x``, ``camera_y``, ``camera_z``: a constant variance along each optical axis (m^2);
 * ``camera_x_range``, ... : a variance growing with the range, (z / z_ref)^2 times the component,

@@ -65,8 +65,9 @@ def test_the_floor_found_predicts_held_out_rests_and_its_large_components(sessio
 
     Fitted on 160 rests, the model and floor give the other 80 a chi-square that follows
     chi2(240) (with the fit's own error in their predictive covariance; summed over 12 seeds:
-    chi2(2880), two-sided 1 %; without the floor it is seven times larger). The large components scatter about the drawn ones as their standard
-    errors say: the mean of 12 z-scores within 3 / sqrt(12). (Small components share what they
+    chi2(2880), two-sided 1 %; without the floor it is seven times larger). The large components
+    scatter about the drawn ones as their standard errors say: the mean of 12 z-scores within
+    3 / sqrt(12). (Small components share what they
     explain with their neighbours near the boundary at zero: only their sum is well determined.)
     """
     meas, R = session
