@@ -85,7 +85,7 @@ class Diagnosis:
 
 def with_candidate(model, name):
     """Return the model with a candidate's parameters present at zero effect."""
-    if name in effects.PARAMETERS and name not in model.effects:
+    if effects.is_effect(name) and name not in model.effects:
         return idf.Model(model.desc, model.P0, {**model.effects, name: np.zeros(3)})
     return model
 
@@ -137,7 +137,7 @@ def position_errors(model, meas):
     That is, between where the model puts the effector (FK of its arm angles) and where the camera
     saw it (P0 + Pi_k).
     """
-    Pi = effects.rotate_increments(model.effects, meas.Pi)
+    Pi = effects.camera_increments(model.effects, meas.Pi, model.desc.camera_rotation)
     P_seen = model.P0 + Pi
     theta, _ = effects.model_joint_angles(model.desc, model.effects, meas.Theta, meas.direction,
                                           P_seen)

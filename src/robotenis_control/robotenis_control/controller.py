@@ -28,7 +28,6 @@ import numpy as np
 from robotenis_control import dynamics, trajectory
 from robotenis_kinematics import delta, effects, workspace
 
-JOINT_EFFECTS = ('joint_scale', 'backlash', 'gravity_compliance')
 MOVING = 1e-3   # rad/s: a joint faster than this sets its motion direction (for backlash)
 
 
@@ -97,7 +96,8 @@ class MotionController:
         self.desc = desc
         # per-tick IK, FK, inverse dynamics
         self.model = dynamics.SingleRobotDynamics(desc, self.mass)
-        self.joint_fx = {k: v for k, v in effects.parameters(desc).items() if k in JOINT_EFFECTS}
+        self.joint_fx = {k: v for k, v in effects.parameters(desc).items()
+                         if effects.is_joint_effect(k)}
         self.direction = np.ones(3)
 
     def check_position(self, P, what='goal'):
@@ -230,7 +230,7 @@ class BatchVelocityController:
 
     def __init__(self, descs, mass=dynamics.MassParameters(), gains=Gains(), max_speed=2.0,
                  velocity_timeout=0.1):
-        joint = [d for d in descs if set(effects.parameters(d)) & set(JOINT_EFFECTS)]
+        joint = [d for d in descs if any(map(effects.is_joint_effect, effects.parameters(d)))]
         if joint:
             raise ValueError('BatchVelocityController: descriptions with joint effects '
                              'are not supported')

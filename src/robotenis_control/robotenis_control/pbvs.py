@@ -16,7 +16,7 @@ from collections import deque
 
 import numpy as np
 
-from robotenis_control.controller import JOINT_EFFECTS, MOVING
+from robotenis_control.controller import MOVING
 from robotenis_kinematics import delta, effects
 
 K_P = 16.8                                  # 1/s, the paper's gain
@@ -114,7 +114,8 @@ class Tracker:
         R = desc.camera_rotation
         self.cov = R @ np.diag(np.square(np.asarray(sigma_camera, dtype=float))) @ R.T
         self.kalman, self.last_t = None, None
-        self.joint_fx = {k: v for k, v in effects.parameters(desc).items() if k in JOINT_EFFECTS}
+        self.joint_fx = {k: v for k, v in effects.parameters(desc).items()
+                         if effects.is_joint_effect(k)}
         self.direction, self.last_Theta = np.ones(3), None
 
     def update(self, t, s, Theta):

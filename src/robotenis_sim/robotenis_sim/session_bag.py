@@ -77,6 +77,14 @@ class BagSpec:
     camera_rate: float = 120.0          # Hz
     frames_per_pose: int = 40
     settle: float = 0.5                 # s from arrival to the start marker
+    # s still at each rest, arrival to departure; None: settle, frames_per_pose frames and TAIL,
+    # as this project's calibration node records a rest
+    rest_time: float = None
+    move_time: tuple = MOVE_TIME        # s: a move takes a + b * (largest joint motion, rad)
+    vibration: tuple = VIBRATION        # the ball holder's shake after arrival
+    rest_floor: tuple = (0.0, 0.0, 0.0)  # m, optical axes: each rest's own error, not averaged out
+    stamp_jitter: float = 0.0           # s: standard deviation of the header stamps' jitter
+    joints: tuple = ('motor_1', 'motor_2', 'motor_3')   # the joint names the driver publishes
     markers: bool = True
     nan_fraction: float = 0.0           # of sphere positions and joint states
     false_fraction: float = 0.0         # of sphere positions
@@ -91,8 +99,10 @@ class SimulatedBag:
     """
     The bag written and what it should give.
 
-    Per rest: the noise-free readings (K, 3, rad), the true sphere centre (K, 3, optical frame, m)
-    and the measuring window between the markers (K, 2, s).
+    Per rest: the noise-free readings (K, 3, rad), the sphere centre the camera measures on average
+    (K, 3, optical frame, m: its undeclared errors included, noise and floor left out), the
+    measuring window between the markers (K, 2, s) and the true effector position (K, 3, base
+    frame, m: for scoring).
     """
 
     path: str
@@ -101,10 +111,16 @@ class SimulatedBag:
     sphere: np.ndarray
     windows: np.ndarray
     counts: dict
+    P: np.ndarray = None
 
 
 def plan(spec, batch=4000):
-    """Return the declared description, readings (K, 3) and true sphere centres (K, 3) of rests."""
+    """
+    Return the declared description, readings, measured sphere centres, true effector positions.
+
+    Each (K, 3): the readings at the rests (rad), the sphere centres the camera measures on
+    average (optical frame, m) and the effector's true positions (base frame, m).
+    """
     declared = description.nominal()
     truth = sim_truth.with_effects(sim_truth.load(), **spec.effects)
     rng = np.random.default_rng(spec.seed)
@@ -116,7 +132,8 @@ def plan(spec, batch=4000):
                                       truth.geometry.sphere_radius)
         P = np.concatenate([P, candidates[seen]])
     Theta, P_true = static_session.rest_positions(truth, declared, P[:spec.poses])
-    return declared, Theta, static_session.sphere_in_camera(truth, P_true)
+    return (declared, Theta,
+            truth.camera_reading(static_session.sphere_in_camera(truth, P_true)), P_true)
 
 
 def schedule(Theta, spec):
@@ -125,16 +142,20 @@ def schedule(Theta, spec):
 
     The times are: move start, arrival, start and end of the measurement, departure. Camera frames
     are at multiples of 1 / camera_rate; the measurement starts at the first frame after the settle
-    time and ends half a period after its last frame.
+    time and ends half a period after its last frame (with ``rest_time``: at the departure).
     """
     period = 1.0 / spec.camera_rate
     rows, t, previous = [], IDLE, np.zeros(3)
     for reading in Theta:
-        arrive = t + MOVE_TIME[0] + MOVE_TIME[1] * np.max(np.abs(reading - previous))
+        arrive = t + spec.move_time[0] + spec.move_time[1] * np.max(np.abs(reading - previous))
         first = np.ceil((arrive + spec.settle) / period) * period
-        end = first + (spec.frames_per_pose - 0.5) * period
-        rows.append((t, arrive, first, end, end + TAIL))
-        t, previous = end + TAIL, reading
+        if spec.rest_time is None:
+            end = first + (spec.frames_per_pose - 0.5) * period
+            leave = end + TAIL
+        else:
+            end = leave = arrive + spec.rest_time
+        rows.append((t, arrive, first, end, leave))
+        t, previous = leave, reading
     return np.array(rows)
 
 
@@ -191,9 +212,9 @@ class _Messages:
                                                             nanosec=ns % 10 ** 9),
             frame_id=frame_id)
 
-    def joint_state(self, t, position):
+    def joint_state(self, t, position, names):
         return self.types['sensor_msgs/msg/JointState'](
-            header=self.header(t), name=['motor_1', 'motor_2', 'motor_3'],
+            header=self.header(t), name=list(names),
             position=np.asarray(position, dtype=float), velocity=np.zeros(0), effort=np.zeros(0))
 
     def point(self, t, p):
@@ -268,20 +289,31 @@ def _joint_states(t0, t1, Theta, times, spec, msgs, rngs):
     raw = readings(t, Theta, times) + rng.normal(scale=RESOLVER.noise, size=(len(t), 3))
     Th = np.round(raw / RESOLVER.resolution) * RESOLVER.resolution
     keep = corrupt(Th, spec, bad_rng, false_offsets=False)
-    return [(ti, '/joint_states', msgs.joint_state(ti, p)) for ti, p, ok in zip(t, Th, keep) if ok]
+    stamps = jittered(t, spec, bad_rng)
+    return [(ti, '/joint_states', msgs.joint_state(ti, p, spec.joints))
+            for ti, p, ok in zip(stamps, Th, keep) if ok]
+
+
+def jittered(t, spec, rng):
+    """Return the header stamps of samples taken at t: with the driver's jitter, in order."""
+    if not spec.stamp_jitter:
+        return t
+    return np.maximum.accumulate(t + rng.normal(scale=spec.stamp_jitter, size=len(t)))
 
 
 def _rest(k, times, sphere, spec, msgs, rngs, radius):
     """Return (time, topic, message) of rest k's camera frames, markers and images."""
     rng, bad_rng = rngs
     tf = frames(times[k, 1], times[k, 3], spec)
-    a, tau, f = VIBRATION
+    a, tau, f = spec.vibration
     axis = rng.normal(size=3)
     shake = a * np.exp(-(tf - times[k, 1]) / tau) * np.sin(2 * np.pi * f * (tf - times[k, 1]))
-    p = (sphere[k] + shake[:, None] * axis / np.linalg.norm(axis)
+    own = rng.normal(size=3) * np.asarray(spec.rest_floor) if np.any(spec.rest_floor) else 0.0
+    p = (sphere[k] + own + shake[:, None] * axis / np.linalg.norm(axis)
          + rng.normal(size=(len(tf), 3)) * FRAME_SIGMA)
     keep = corrupt(p, spec, bad_rng)
-    out = [(ti, '/sphere/position', msgs.point(ti, pi)) for ti, pi, ok in zip(tf, p, keep) if ok]
+    out = [(ti, '/sphere/position', msgs.point(ti, pi))
+           for ti, pi, ok in zip(jittered(tf, spec, bad_rng), p, keep) if ok]
     if spec.markers:
         out += [(times[k, 2], '/calibration/rest', msgs.marker(times[k, 2], k, True)),
                 (times[k, 3], '/calibration/rest', msgs.marker(times[k, 3], k, False))]
@@ -311,7 +343,7 @@ def write(path, spec=BagSpec(), progress=None):
 
     ``progress(k, K)`` is called after each rest.
     """
-    declared, Theta, sphere = plan(spec)
+    declared, Theta, sphere, P_true = plan(spec)
     rngs = (np.random.default_rng(spec.seed + 1), np.random.default_rng(spec.seed + 2))
     times = schedule(Theta, spec)
     topics = [t for t in TOPICS
@@ -337,7 +369,7 @@ def write(path, spec=BagSpec(), progress=None):
     finally:
         bag.close()
     return SimulatedBag(str(path), declared, Theta, sphere, times[:, 2:4] + START_NS * 1e-9,
-                        counts)
+                        counts, P_true)
 
 
 def truncate(bag_dir, keep_fraction, drop_metadata=False):

@@ -49,13 +49,16 @@ def rest_positions(truth, declared, P_cmd):
     return Theta, delta.forward(truth.geometry, arm)
 
 
-def run(truth, declared, P_cmd, noise, rng, camera=DEFAULT_CAMERA):
+def run(truth, declared, P_cmd, noise, rng, camera=DEFAULT_CAMERA, floor=(0.0, 0.0, 0.0)):
     """
     Simulate the averaged measurements of a static session over commanded positions P_cmd (K, 3).
 
     Returns (Theta, sigma_Theta, sphere, sphere_cov, kept): readings with noise, the sphere centres
-    seen by the camera with noise, and the indices of P_cmd whose rest gave a measurement.
-    ``noise`` is a robotenis_kinematics.synthetic.NoiseModel (sigma_camera along the optical axes).
+    the camera measures (its undeclared errors, truth.camera_reading, and noise), and the indices
+    of P_cmd whose rest gave a measurement. ``noise`` is a synthetic.NoiseModel (sigma_camera
+    along the optical axes: the averaged frames' spread, what sphere_cov says);
+    ``floor`` (m, optical axes) is each rest's own error beyond it, drawn once per rest and not
+    in sphere_cov, as what a detector gets wrong at a pose is not in its frames' spread.
     """
     P_cmd = np.asarray(P_cmd, dtype=float)
     P_rest = rest_positions(truth, declared, P_cmd)[1]
@@ -63,9 +66,11 @@ def run(truth, declared, P_cmd, noise, rng, camera=DEFAULT_CAMERA):
                                   camera))
     # Visit only what the camera sees: the motion directions follow the poses actually visited.
     Theta, P = rest_positions(truth, declared, P_cmd[kept])
-    sphere = sphere_in_camera(truth, P)
+    sphere = truth.camera_reading(sphere_in_camera(truth, P))
     cov = np.diag(np.square(noise.sigma_camera))
     sphere = sphere + rng.multivariate_normal(np.zeros(3), cov, size=len(kept))
+    if np.any(floor):
+        sphere = sphere + rng.normal(size=sphere.shape) * np.asarray(floor, dtype=float)
     Theta = Theta + rng.normal(scale=noise.sigma_resolver, size=Theta.shape)
     sigma = np.full_like(Theta, noise.sigma_resolver)
     return Theta, sigma, sphere, np.broadcast_to(cov, (len(kept), 3, 3)).copy(), kept

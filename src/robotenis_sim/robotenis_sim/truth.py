@@ -18,6 +18,12 @@ Read by the simulator only. A truth file is YAML::
       base_geometry: {dH: [...], dphi: [...]}  # m, rad: motor axes off the declared H_i, phi_i
       hand_eye_rotation: [rx, ry, rz]      # rad, rotation vector: true camera mount = declared
                                            # R exp([r])
+      # and three no calibration library names (the residual loop must not name them):
+      joint_eccentricity: {order: 5, amplitude: [...], phase: [...]}  # rad: reading + a_i
+                                           # sin(n motor_i + p_i), an eccentric gear
+      camera_depth_scale: 0.004            # the camera reads the range (1 + e) z
+      lens_residue: 0.002                  # radial distortion the camera's model lacks: the
+                                           # measured x, y are (1 + k (u^2 + v^2)) x, y
 
 The geometry defaults to the calibration paper's Table 1 calibrated column
 (``truth_default.yaml``), so that nominal and truth differ as on the real robot.
@@ -30,7 +36,9 @@ from robotenis_kinematics import delta, description, effects as model_effects
 from robotenis_kinematics.description import DescriptionError
 import yaml
 
-EFFECTS = ('joint_scale', 'backlash', 'gravity_compliance', 'base_geometry', 'hand_eye_rotation')
+EFFECTS = ('joint_scale', 'backlash', 'gravity_compliance', 'base_geometry', 'hand_eye_rotation',
+           'joint_eccentricity', 'camera_depth_scale', 'lens_residue')
+SCALAR_EFFECTS = ('camera_depth_scale', 'lens_residue')
 G = model_effects.G
 rotation_vector_matrix = model_effects.rotation_vector_matrix
 
@@ -106,14 +114,36 @@ class Truth:
         return self.reading(motor)
 
     def reading(self, motor):
-        """Return the drives' increments for motor angles (absolute), gear-ratio error applied."""
+        """Return the drives' increments for motor angles (absolute): gear and eccentricity."""
         s = np.asarray(self.effects.get('joint_scale', np.zeros(3)), dtype=float)
-        return (1 + s) * (np.asarray(motor, dtype=float) - self.geometry.theta0)
+        motor = np.asarray(motor, dtype=float)
+        return (1 + s) * (motor - self.geometry.theta0) + self._eccentricity(motor)
 
     def motor_from_reading(self, Theta):
         """Return motor angles (absolute) for resolver increments: the inverse of ``reading``."""
         s = np.asarray(self.effects.get('joint_scale', np.zeros(3)), dtype=float)
-        return self.geometry.theta0 + np.asarray(Theta, dtype=float) / (1 + s)
+        Theta = np.asarray(Theta, dtype=float)
+        motor = self.geometry.theta0 + Theta / (1 + s)
+        for _ in range(4 if 'joint_eccentricity' in self.effects else 0):
+            # the error's slope n a is 2e-3 or less: each pass contracts it that much
+            motor = self.geometry.theta0 + (Theta - self._eccentricity(motor)) / (1 + s)
+        return motor
+
+    def _eccentricity(self, motor):
+        e = self.effects.get('joint_eccentricity')
+        if e is None:
+            return 0.0
+        return e['amplitude'] * np.sin(e['order'] * motor + e['phase'])
+
+    def camera_reading(self, sphere):
+        """Return the sphere centres (..., 3) the camera measures for the true ones: its errors."""
+        sphere = np.array(sphere, dtype=float)
+        k = self.effects.get('lens_residue', 0.0)
+        if k:
+            rho2 = (sphere[..., 0] ** 2 + sphere[..., 1] ** 2) / sphere[..., 2] ** 2
+            sphere[..., :2] *= (1 + k * rho2)[..., None]
+        sphere[..., 2] *= 1 + self.effects.get('camera_depth_scale', 0.0)
+        return sphere
 
 
 def _vector(value, key, n=3):
@@ -130,6 +160,25 @@ def geometry_file(name, folder):
         package, _, rest = name[len('package://'):].partition('/')
         return os.path.join(get_package_share_directory(package), rest)
     return os.path.join(folder, name)
+
+
+def _scalar(value, key):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise DescriptionError(f'{key}: expected a finite number, got {value!r}')
+    return float(value)
+
+
+def _eccentricity(value):
+    if not isinstance(value, dict):
+        raise DescriptionError('effects.joint_eccentricity: expected a map of order, amplitude, '
+                               'phase')
+    order = value.get('order')
+    if isinstance(order, bool) or not isinstance(order, int) or order < 1:
+        raise DescriptionError('effects.joint_eccentricity.order: expected a positive integer, '
+                               f'got {order!r}')
+    return {'order': order,
+            'amplitude': _vector(value.get('amplitude'), 'effects.joint_eccentricity.amplitude'),
+            'phase': _vector(value.get('phase', [0, 0, 0]), 'effects.joint_eccentricity.phase')}
 
 
 def from_dict(data, folder='.'):
@@ -150,7 +199,11 @@ def from_dict(data, folder='.'):
                                    f"(known: {', '.join(EFFECTS)})")
     parsed = {}
     for name, value in effects.items():
-        if name == 'base_geometry':
+        if name in SCALAR_EFFECTS:
+            parsed[name] = _scalar(value, f'effects.{name}')
+        elif name == 'joint_eccentricity':
+            parsed[name] = _eccentricity(value)
+        elif name == 'base_geometry':
             dH = _vector(value.get('dH', [0, 0, 0]), 'effects.base_geometry.dH')
             dphi = _vector(value.get('dphi', [0, 0, 0]), 'effects.base_geometry.dphi')
             geometry = geometry.copy(H=geometry.H + dH, phi=geometry.phi + dphi)
@@ -208,8 +261,11 @@ def _plain(obj):
         return {k: _plain(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple, np.ndarray)):
         return [_plain(v) for v in obj]
-    return (float(obj) if isinstance(obj, (np.floating, float, int)) and not isinstance(obj, bool)
-            else obj)
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    return float(obj) if isinstance(obj, (float, np.floating)) else obj
 
 
 def default_path():
