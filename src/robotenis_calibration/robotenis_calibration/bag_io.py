@@ -224,21 +224,40 @@ class BagReader:
         The stamp is the header stamp when the message has a non-zero one, the recording time
         otherwise.
         """
-        store = typestore()
         broken = Counter()
         for r in self.records(topics, progress, steps):
-            try:
-                decode = FAST_DECODERS.get(r.type_name)
-                msg = decode(r.data) if decode else store.deserialize_cdr(r.data, r.type_name)
-            except KeyError as e:
-                raise ValueError(f'{r.topic}: message type {r.type_name!r}'
-                                 ' is not known to the typestore') from e
-            except (SerdeError, struct.error, ValueError):
+            msg = decode(r)
+            if msg is None:
                 broken[r.topic] += 1       # a corrupt record: skip it, say so once per topic below
                 continue
             yield r.topic, r.type_name, stamp_ns(msg, r.log_ns), msg
+        self.note_broken(broken)
+
+    def note_broken(self, broken):
+        """Say in ``notes`` how many messages of each topic could not be decoded."""
         for topic, n in broken.items():
             self.notes.append(f'{topic}: {n} message(s) could not be decoded and were skipped')
+
+
+def decode(record):
+    """
+    Return the message of a Record, deserialized; None when its bytes are corrupt.
+
+    Raises
+    ------
+    ValueError
+        if its type is not known to the typestore.
+
+    """
+    try:
+        fast = FAST_DECODERS.get(record.type_name)
+        return fast(record.data) if fast else \
+            typestore().deserialize_cdr(record.data, record.type_name)
+    except KeyError as e:
+        raise ValueError(f'{record.topic}: message type {record.type_name!r}'
+                         ' is not known to the typestore') from e
+    except (SerdeError, struct.error, ValueError):
+        return None
 
 
 def stamp_ns(msg, log_ns):

@@ -15,7 +15,7 @@ Topics (a missing one is a ValueError naming it); times are the messages' header
 Rests. With markers, a rest is the time between a pose's start and end markers (the session waited
 for the robot to settle before the start marker). Without them, rests are found from the joint
 states: the robot is still where, on every joint, the mean reading over half a window (m samples,
-``window`` / 2) and the mean over the next half window differ by at most
+``window`` / 2, at least two) and the mean over the next half window differ by at most
 
     delta = k sqrt(2 / m) sigma + q,
 
@@ -23,25 +23,30 @@ k standard deviations of that difference under noise alone (sigma: the readings'
 median absolute difference of consecutive readings, i.e. mostly from the rests) plus one count q of
 the resolvers (the smallest step between two readings), which a reading sitting on a count boundary
 may flip without moving: a speed threshold of delta / (m dt). A still period is a rest if it lasts
-at least ``min_duration``; its first ``settle`` seconds are skipped (vibrations of the robot and of
-the ball's holder that the joints do not show).
+at least ``min_duration`` (default: one window). Its first seconds are skipped while the camera's
+signal still moves (vibrations of the robot and of the ball's holder that the joints do not show):
+the settle margin is found from the data (``settle_time``: pooled over the rests, the first time
+after the joints stop from which the frames scatter as the frames' noise alone about their rest's
+final position), or given (``settle``).
 
-Averaging, per rest and over the same window for both sensors: non-finite samples are dropped, then
-``robust_mean`` rejects outliers (false detections): a median/MAD start, then a chi-square gate at
-level ``alpha`` against the spread, iterated with the mean and covariance of the other samples kept
-(leave one out: the gate is exact for Gaussian samples, however few). The covariance of the mean is
-S / n * (n - 1) / (n - p - 2), S the covariance of one sample: its inverse is then an unbiased
-estimate of the mean's precision (the mean of an inverse Wishart), so chi-square statistics keep
-their expectation even with few frames per rest. Readings use per-joint variances (p = 1) with a
-floor of q^2 / 12 per sample (a joint whose readings never change still has the quantisation
-spread). Samples are taken as independent: camera frames are; resolver noise at rest is white in
-the simulator. A rest with fewer than ``min_samples`` good camera frames or readings is skipped
-with a note.
+Averaging, per rest and over the same window for both sensors. The frames' noise is learned from
+all the rests at once (``FrameNoise``): along each optical axis a variance c_a (z / z_ref)^g_a
+(a detector's depth noise grows with the range), fitted by maximum likelihood to the rests' sample
+variances, and one correlation matrix; the readings' noise per joint likewise, at least the
+quantisation's q^2 / 12. So a rest needs no minimum number of frames for its covariance: two frames
+and two readings (``min_samples``) make a rest, its mean's covariance is the noise model's over the
+number of samples kept. Non-finite samples are dropped; outliers (false detections) are rejected
+by an exact chi-square gate at level ``alpha``: each sample against the mean of the others kept,
+with the noise model's covariance, from a median start. What each rest gets wrong beyond its
+frames' spread (a detector's error at that pose) is the floor the identification learns
+(robotenis_kinematics.variance).
 """
+from collections import Counter
 from dataclasses import dataclass
+import functools
 
 import numpy as np
-from robotenis_calibration import bag_io
+from robotenis_calibration import bag_io, cdr_arrays
 from robotenis_calibration.session import Session
 from robotenis_kinematics import description
 from robotenis_ros.convert import joint_vector
@@ -58,6 +63,15 @@ MAX_PASSES = 50       # of the outlier gate; it settles in a few
 START_ALPHA = 1e-6    # the first, robust gate (median and MAD) only takes out gross outliers
 # m: floor on a frame's standard deviation, far below any detector's; keeps the gate defined
 SPHERE_FLOOR = 1e-9
+Z_REFERENCE = 0.35    # m: the range the frames' noise model is written at
+EXPONENTS = np.linspace(0.0, 4.0, 41)   # g of the noise model's c (z / z_ref)^g, searched
+SETTLE_LEVEL = 1e-3   # the pooled test that the frames have settled, per time bin
+
+
+@functools.lru_cache(maxsize=None)
+def chi2_quantile(q, dof):
+    """Return the chi-square quantile q of dof degrees of freedom (cached: the gates repeat)."""
+    return float(stats.chi2.ppf(q, dof))
 
 
 @dataclass(frozen=True)
@@ -66,9 +80,9 @@ class RestParameters:
 
     window: float = 0.2         # s: two half windows whose mean readings are compared
     k: float = 5.0              # noise standard deviations of that difference allowed at rest
-    min_duration: float = 0.5   # s: a shorter still period is not a rest
-    settle: float = 0.5         # s skipped at the start of a rest found from the joint states
-    min_samples: int = 20       # good camera frames (and readings) a rest needs
+    min_duration: float = None  # s: a shorter still period is not a rest (None: one window)
+    settle: float = None        # s skipped at the start of a found rest (None: from the data)
+    min_samples: int = 2        # good camera frames (and readings) a rest needs
     alpha: float = 1e-3         # outlier gate: a good sample is rejected with this probability
 
 
@@ -103,44 +117,98 @@ def check_topics(reader):
             raise ValueError(f'{topic}: no messages in the bag {reader.path}{why}')
 
 
-def read(reader, notes, progress=None):
-    """Read the Recording of an open BagReader (time order), counting odd messages in ``notes``."""
+def read(reader, notes, progress=None, joints=JOINTS):
+    """
+    Read the Recording of an open BagReader (time order), counting odd messages in ``notes``.
+
+    ``joints``: the names of the three joints, leg by leg, as the bag's JointState calls them.
+    """
     check_topics(reader)
-    topics = list(REQUIRED) + ([MARKERS[0]] if reader.topics.get(MARKERS[0]) == MARKERS[1] else [])
-    text, joints, spheres, markers, unnamed = None, [], [], [], 0
+    raw = {topic: [] for topic in ('/joint_states', '/sphere/position')}
     report = ((lambda done, total: progress(f'read {done} of {total} messages')) if progress
               else None)
-    for topic, _, stamp, msg in reader.messages(topics, report, steps=10):
-        t = stamp * 1e-9
-        if topic == '/joint_states':
-            position = joint_vector(msg, 'position')
-            if position is None:
-                unnamed += 1
-            else:
-                joints.append([t, *position])
-        elif topic == '/sphere/position':
-            spheres.append((t, msg.point.x, msg.point.y, msg.point.z))
-        elif topic == MARKERS[0]:
-            markers.append((t, int(msg.pose_index), bool(msg.start)))
-        elif text is None:          # /robot_description: the first one
-            text = msg.data
-    if unnamed:
-        notes.append(f'{unnamed} /joint_states messages without positions of'
-                     f' {", ".join(JOINTS)} ignored')
-    try:
-        declared = description.loads(text)
-    except ValueError as e:
-        raise ValueError(f'/robot_description: {e}') from e
-    J = _sorted(np.array(joints, dtype=float).reshape(-1, 4))
+    for record in reader.records(list(raw), report, steps=10):
+        raw[record.topic].append(record)
+    t_joint, Theta = _joint_states(raw['/joint_states'], joints, reader, notes)
+    t_sphere, sphere = _points(raw['/sphere/position'], reader)
+    declared = _declared(reader, notes)
+    markers = []
+    if reader.topics.get(MARKERS[0]) == MARKERS[1]:
+        markers = sorted((stamp * 1e-9, int(msg.pose_index), bool(msg.start))
+                         for _, _, stamp, msg in reader.messages([MARKERS[0]]))
+    J = _sorted(np.column_stack([t_joint, Theta]))
     finite = np.all(np.isfinite(J), axis=1)
     if not finite.any():
-        raise ValueError(f'/joint_states: no message has finite positions of {", ".join(JOINTS)}')
+        raise ValueError(f'/joint_states: no message has finite positions of {", ".join(joints)}')
     if not finite.all():
         notes.append(f'{int((~finite).sum())} /joint_states readings with NaN or infinite values'
                      ' dropped')
     J = J[finite]
-    S = _sorted(np.array(spheres, dtype=float).reshape(-1, 4))
-    return Recording(declared, J[:, 0], J[:, 1:], S[:, 0], S[:, 1:], sorted(markers))
+    S = _sorted(np.column_stack([t_sphere, sphere]))
+    return Recording(declared, J[:, 0], J[:, 1:], S[:, 0], S[:, 1:], markers)
+
+
+def _stamp_seconds(stamps_ns, records):
+    """Return header stamps in s, the recording time where a stamp is zero."""
+    log = np.fromiter((r.log_ns for r in records), dtype=np.int64, count=len(records))
+    return np.where(stamps_ns != 0, stamps_ns, log) * 1e-9
+
+
+def _joint_states(records, joints, reader, notes):
+    """Return the stamps (n,) and readings of ``joints`` (n, 3) of the JointState records."""
+    stamps, values, ok, names = cdr_arrays.joint_positions([r.data for r in records], joints)
+    broken, unnamed = Counter(), 0
+    for i in np.flatnonzero(~ok):               # layouts the arrays could not read: one by one
+        msg = bag_io.decode(records[i])
+        if msg is None:
+            broken[records[i].topic] += 1
+            continue
+        names.add(tuple(msg.name))
+        position = joint_vector(msg, 'position', joints)
+        if position is None:
+            unnamed += 1
+            continue
+        stamps[i], values[i], ok[i] = bag_io.stamp_ns(msg, 0), position, True
+    reader.note_broken(broken)
+    if not ok.any():
+        found = '; '.join(', '.join(n) for n in sorted(names)) or 'none'
+        raise ValueError(f'/joint_states: no message has positions of {", ".join(joints)} '
+                         f'(names found: {found}); name the joints with --joints')
+    if unnamed:
+        notes.append(f'{unnamed} /joint_states messages without positions of'
+                     f' {", ".join(joints)} ignored')
+    return _stamp_seconds(stamps, records)[ok], values[ok]
+
+
+def _points(records, reader):
+    """Return the stamps (n,) and points (n, 3) of the PointStamped records."""
+    stamps, xyz, ok = cdr_arrays.points([r.data for r in records])
+    broken = Counter()
+    for i in np.flatnonzero(~ok):
+        msg = bag_io.decode(records[i])
+        if msg is None:
+            broken[records[i].topic] += 1
+            continue
+        stamps[i], ok[i] = bag_io.stamp_ns(msg, 0), True
+        xyz[i] = (msg.point.x, msg.point.y, msg.point.z)
+    reader.note_broken(broken)
+    return _stamp_seconds(stamps, records)[ok], xyz[ok]
+
+
+def _declared(reader, notes):
+    """Return the declared description: the first /robot_description, noting any others."""
+    texts = [(stamp, msg.data) for _, _, stamp, msg in reader.messages(['/robot_description'])]
+    if not texts:
+        raise ValueError('/robot_description: no message could be decoded')
+    texts.sort(key=lambda item: item[0])
+    if len(texts) > 1:
+        differ = sum(text != texts[0][1] for _, text in texts[1:])
+        notes.append(f'{len(texts)} /robot_description messages ({differ} different from the '
+                     f'first): the first, at {texts[0][0] * 1e-9:.3f} s, is used')
+    try:
+        return description.loads(texts[0][1])
+    except ValueError as e:
+        raise ValueError(f'/robot_description: {e}') from e
 
 
 def _sorted(rows):
@@ -176,7 +244,8 @@ def resolver_noise(Theta):
 
 def still_periods(t, Theta, params=RestParameters()):
     """(start, end) times of the periods where all joints stay still for at least min_duration."""
-    dt = np.median(np.diff(t)) if len(t) > 1 else np.inf
+    # the mean interval: a median would follow the stamps' jitter, not the rate
+    dt = (t[-1] - t[0]) / (len(t) - 1) if len(t) > 1 else np.inf
     m = max(2, int(round(params.window / 2 / dt))) if np.isfinite(dt) and dt > 0 else 2
     if len(t) < 2 * m + 1:
         return []
@@ -190,14 +259,60 @@ def still_periods(t, Theta, params=RestParameters()):
     edges = np.diff(np.concatenate([[0], still.astype(int), [0]]))
     starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
     periods = [(t[i[a]], t[i[b - 1]]) for a, b in zip(starts, ends)]
-    return [(a, b) for a, b in periods if b - a >= params.min_duration]
+    shortest = params.window if params.min_duration is None else params.min_duration
+    return [(a, b) for a, b in periods if b - a >= shortest]
 
 
-def found_windows(rec, params):
-    """(start, end, label) of the rests found from the joint states, after the settle margin."""
+def found_windows(rec, params, notes):
+    """Return (start, end, label) of the rests found from the joint states, after settling."""
+    periods = still_periods(rec.t_joint, rec.Theta, params)
+    settle = params.settle
+    if settle is None:
+        settle = settle_time(rec, periods)
+        notes.append(f'settle margin found from the data: {settle:.3f} s after the joints stop')
     t_first = rec.t_joint[0]
-    return [(a + params.settle, b, f'rest at {a - t_first:.1f} s')
-            for a, b in still_periods(rec.t_joint, rec.Theta, params) if b > a + params.settle]
+    return [(a + settle, b, f'rest at {a - t_first:.1f} s') for a, b in periods if b > a + settle]
+
+
+def settle_time(rec, periods, level=SETTLE_LEVEL):
+    """
+    Return the time after the joints stop from which the camera's frames have settled (s).
+
+    Pooled over the still periods: each frame's deviation from its period's final position (the
+    median of its second half) in units of the frames' noise (from differences of consecutive
+    frames) is squared and summed over the axes, about 3 once settled. In bins of a frame period of
+    time since the stop, the sum over a bin's frames is tested against its chi-square quantile
+    1 - level; the margin is the start of the first bin from which every bin passes (at most half
+    the shortest period).
+    """
+    deviations, since = [], []
+    for a, b in periods:
+        i0, i1 = np.searchsorted(rec.t_sphere, [a, b])
+        frames = rec.sphere[i0:i1]
+        finite = np.all(np.isfinite(frames), axis=1)
+        if finite.sum() < 4:
+            continue
+        t, x = rec.t_sphere[i0:i1][finite] - a, frames[finite]
+        deviations.append(x - np.median(x[len(x) // 2:], axis=0))
+        since.append(t)
+    if not deviations:
+        return 0.0
+    steps = np.concatenate([np.diff(d[len(d) // 2:], axis=0) for d in deviations])
+    sigma = np.maximum(1.4826 * np.median(np.abs(steps), axis=0) / np.sqrt(2), SPHERE_FLOOR)
+    chi2 = np.sum((np.concatenate(deviations) / sigma) ** 2, axis=1)
+    since = np.concatenate(since)
+    period = float(np.median(np.diff(rec.t_sphere))) if len(rec.t_sphere) > 1 else 0.01
+    longest = 0.5 * min(b - a for a, b in periods)
+    edges = np.arange(0.0, longest + period, period)
+    bins = np.digitize(since, edges) - 1
+    passed = []
+    for j in range(len(edges) - 1):
+        values = chi2[bins == j]
+        # the final position is itself a median of half the frames: 2 % more spread, allowed
+        passed.append(len(values) == 0 or values.sum()
+                      <= 1.02 * chi2_quantile(1 - level, 3 * len(values)))
+    failing = [j for j, ok in enumerate(passed) if not ok]
+    return float(edges[failing[-1] + 1]) if failing else 0.0
 
 
 def robust_mean(x, floor, alpha):
@@ -212,12 +327,12 @@ def robust_mean(x, floor, alpha):
     (P(chi2(p+2) <= g) / P(chi2(p) <= g)); ``floor`` (p,) bounds each variance from below.
     """
     p = x.shape[1]
-    gate = stats.chi2.ppf(1 - alpha, p)
+    gate = chi2_quantile(1 - alpha, p)
     consistency = stats.chi2.cdf(gate, p + 2) / (1 - alpha)
     center = np.median(x, axis=0)
     cov = np.diag(np.maximum((1.4826 * np.median(np.abs(x - center), axis=0)) ** 2, floor))
     d = x - center
-    keep = np.einsum('ni,ij,nj->n', d, np.linalg.inv(cov), d) <= stats.chi2.ppf(1 - START_ALPHA, p)
+    keep = np.einsum('ni,ij,nj->n', d, np.linalg.inv(cov), d) <= chi2_quantile(1 - START_ALPHA, p)
     for _ in range(MAX_PASSES):
         if keep.sum() < p + 3:
             break
@@ -250,9 +365,88 @@ def loo_gate(x, keep, center, cov, alpha):
     return D2 <= gate
 
 
-def unbiased_precision_factor(n, p):
-    """(n - 1) / (n - p - 2): scales a sample covariance so that its inverse is unbiased."""
-    return (n - 1) / (n - p - 2)
+@dataclass
+class FrameNoise:
+    """
+    The noise of one sample, learned from every rest: per axis a variance c (z / z_ref)^g.
+
+    ``c`` (p,) and ``g`` (p,) per axis, ``correlation`` (p, p); for the readings g is zero.
+    """
+
+    c: np.ndarray
+    g: np.ndarray
+    correlation: np.ndarray
+
+    def covariance(self, z):
+        """Return one sample's covariance matrices, (K, p, p), at the ranges z (K,), m."""
+        scale = (np.asarray(z, dtype=float)[:, None] / Z_REFERENCE) ** self.g
+        sd = np.sqrt(self.c * scale)
+        return sd[:, :, None] * self.correlation * sd[:, None, :]
+
+    def as_dict(self):
+        """Return the model as plain data (for a result file)."""
+        return {'variance_at_reference': self.c.tolist(), 'range_exponent': self.g.tolist(),
+                'correlation': self.correlation.tolist(), 'reference_range': Z_REFERENCE}
+
+
+def frame_noise(groups, z, floor, grow=True):
+    """
+    Return the FrameNoise of samples grouped by rest (list of (n_k, p)) at ranges z (K,).
+
+    Maximum likelihood over the rests with two or more samples: given g, the best c is the
+    dof-weighted mean of s^2 / (z / z_ref)^g; g is searched over EXPONENTS (``grow`` False: 0).
+    ``floor`` (p,) bounds c from below.
+    """
+    used = [k for k, x in enumerate(groups) if len(x) >= 2]
+    p = groups[used[0]].shape[1] if used else len(floor)
+    if not used:
+        return FrameNoise(np.asarray(floor, dtype=float), np.zeros(p), np.eye(p))
+    dof = np.array([len(groups[k]) - 1 for k in used], dtype=float)
+    resid = [groups[k] - groups[k].mean(axis=0) for k in used]
+    s2 = np.array([np.sum(r ** 2, axis=0) for r in resid]) / dof[:, None]
+    zr = np.asarray(z, dtype=float)[used] / Z_REFERENCE
+    c, g = np.empty(p), np.empty(p)
+    for a in range(p):
+        best = None
+        for exponent in (EXPONENTS if grow else [0.0]):
+            shape = zr ** exponent
+            ca = max(np.sum(dof * s2[:, a] / shape) / np.sum(dof), floor[a])
+            loss = np.sum(dof * (np.log(ca * shape) + s2[:, a] / (ca * shape)))
+            if best is None or loss < best[0]:
+                best = (loss, ca, exponent)
+        _, c[a], g[a] = best
+    sd = np.sqrt(c * zr[:, None] ** g)
+    u = np.concatenate([r / sd[i] for i, r in enumerate(resid)])
+    moment = u.T @ u / np.sum(dof)
+    d = np.sqrt(np.diag(moment))
+    return FrameNoise(c, g, moment / np.outer(d, d))
+
+
+def known_gate(x, cov, alpha):
+    """
+    Return the mask of samples (n, p) within the level-alpha gate, with a known covariance (p, p).
+
+    A good sample x minus the mean of m others is N(0, (1 + 1/m) cov): its squared Mahalanobis
+    distance over (1 + 1/m) follows chi2(p) exactly. From the median, until the kept set repeats.
+    """
+    n, p = x.shape
+    inverse = np.linalg.inv(cov)
+    d = x - np.median(x, axis=0)
+    keep = np.einsum('ni,ij,nj->n', d, inverse, d) <= chi2_quantile(1 - START_ALPHA, p)
+    gate = chi2_quantile(1 - alpha, p)
+    for _ in range(MAX_PASSES):
+        m = int(keep.sum())
+        if m < 2:
+            return keep
+        total = x[keep].sum(axis=0)
+        others = np.where(keep[:, None], (total - x) / max(m - 1, 1), total / m)
+        count = np.where(keep, m - 1, m)
+        d = x - others
+        new = np.einsum('ni,ij,nj->n', d, inverse, d) / (1 + 1 / count) <= gate
+        if np.array_equal(new, keep):
+            break
+        keep = new
+    return keep
 
 
 # rad: a joint this far from its rest value was moving toward it (5 counts and the noise)
@@ -279,41 +473,65 @@ def approach_direction(t_joint, Theta, t0, rest, previous):
 def average(rec, windows, params, notes):
     """Average the rests in ``windows`` into a Session (module docstring); skips go to notes."""
     _, q = resolver_noise(rec.Theta)
-    rows, rejected, total, direction = [], 0, 0, np.ones(3)
+    spheres, readings, kept_windows = [], [], []
     for t0, t1, label in windows:
         s0, s1 = np.searchsorted(rec.t_sphere, t0), np.searchsorted(rec.t_sphere, t1, side='right')
         j0, j1 = np.searchsorted(rec.t_joint, t0), np.searchsorted(rec.t_joint, t1, side='right')
         sphere = rec.sphere[s0:s1]
-        Theta = rec.Theta[j0:j1]
         sphere = sphere[np.all(np.isfinite(sphere), axis=1)]
-        if min(len(sphere), len(Theta)) < params.min_samples:
-            notes.append(f'{label}: only {len(sphere)} camera frames and {len(Theta)} readings '
+        if min(len(sphere), j1 - j0) < params.min_samples:
+            notes.append(f'{label}: only {len(sphere)} camera frames and {j1 - j0} readings '
                          f'(at least {params.min_samples} needed), skipped')
             continue
-        s, S, keep = robust_mean(sphere, np.full(3, SPHERE_FLOOR ** 2), params.alpha)
-        th, T, keep_T = robust_mean(Theta, q ** 2 / 12, params.alpha)
+        spheres.append(sphere)
+        readings.append(rec.Theta[j0:j1])
+        kept_windows.append((t0, t1, label))
+    if not spheres:
+        return _empty(rec.description)
+    z = np.array([np.median(x[:, 2]) for x in spheres])
+    # the noise models from provisionally cleaned samples, then the exact gate with them
+    camera = frame_noise([x[_provisional(x)] for x in spheres], z, np.full(3, SPHERE_FLOOR ** 2))
+    joints = frame_noise(readings, z, q ** 2 / 12, grow=False)
+    camera_cov, joint_cov = camera.covariance(z), joints.covariance(z)
+    rows, rejected, total, direction = [], 0, 0, np.ones(3)
+    for k, (t0, t1, label) in enumerate(kept_windows):
+        keep = known_gate(spheres[k], camera_cov[k], params.alpha)
+        keep_T = known_gate(readings[k], joint_cov[k], params.alpha)
         n, n_T = int(keep.sum()), int(keep_T.sum())
         if min(n, n_T) < params.min_samples:
             notes.append(f'{label}: only {n} camera frames and {n_T} readings agree with the rest '
                          f'(at least {params.min_samples} needed), skipped')
             continue
-        rejected, total = rejected + len(sphere) - n, total + len(sphere)
+        rejected, total = rejected + len(keep) - n, total + len(keep)
+        th = readings[k][keep_T].mean(axis=0)
         direction = approach_direction(rec.t_joint, rec.Theta, t0, th, direction)
-        rows.append((th, np.sqrt(np.diag(T) / n_T * unbiased_precision_factor(n_T, 1)), s,
-                     S / n * unbiased_precision_factor(n, 3), 0.5 * (t0 + t1), n, direction))
+        rows.append((th, np.sqrt(np.diag(joint_cov[k]) / n_T), spheres[k][keep].mean(axis=0),
+                     camera_cov[k] / n, 0.5 * (t0 + t1), n, direction))
     notes.append(f'{rejected} of {total} finite camera frames in the rests rejected as outliers')
     if not rows:
-        return Session(rec.description, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)),
-                       np.zeros((0, 3, 3)), np.zeros(0), np.zeros(0, dtype=int), np.zeros((0, 3)))
+        return _empty(rec.description)
     Theta, sigma, sphere, cov, stamps, samples, direction = (np.array(v) for v in zip(*rows))
-    return Session(rec.description, Theta, sigma, sphere, cov, stamps, samples, direction)
+    return Session(rec.description, Theta, sigma, sphere, cov, stamps, samples, direction,
+                   {'camera': camera.as_dict(), 'resolvers': joints.as_dict()})
 
 
-def load_session(bag_dir, params=RestParameters(), progress=None):
+def _provisional(x):
+    """Return the mask of a rest's frames without its gross outliers, for the noise model."""
+    if len(x) < 6:
+        return np.ones(len(x), dtype=bool)
+    return robust_mean(x, np.full(3, SPHERE_FLOOR ** 2), START_ALPHA)[2]
+
+
+def _empty(declared):
+    return Session(declared, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)),
+                   np.zeros((0, 3, 3)), np.zeros(0), np.zeros(0, dtype=int), np.zeros((0, 3)))
+
+
+def load_session(bag_dir, params=RestParameters(), progress=None, joints=JOINTS):
     """(Session, notes) of a recorded session; ValueError naming a missing topic or bad content."""
     notes = []
     with bag_io.BagReader(bag_dir) as reader:
-        rec = read(reader, notes, progress)
+        rec = read(reader, notes, progress, joints)
         notes[:0] = reader.notes
     bad = int((~np.all(np.isfinite(rec.sphere), axis=1)).sum())
     if bad:
@@ -322,8 +540,8 @@ def load_session(bag_dir, params=RestParameters(), progress=None):
         windows = marked_windows(rec.markers, notes)
         notes.append(f'{len(windows)} rests between /calibration/rest markers')
     else:
-        windows = found_windows(rec, params)
+        windows = found_windows(rec, params, notes)
+        shortest = params.window if params.min_duration is None else params.min_duration
         notes.append(f'no /calibration/rest markers: {len(windows)} rests found from the joint'
-                     f' states (still for at least {params.min_duration} s; the first'
-                     f' {params.settle} s of each skipped)')
+                     f' states (still for at least {shortest} s)')
     return average(rec, windows, params, notes), notes

@@ -28,6 +28,8 @@ class Session:
     samples : (K,) number of camera frames averaged at each rest.
     direction : (K, 3) sign of each joint's last motion before each rest, when the recording shows
         it (poses visited but not measured lie between rests); by default from the order of Theta.
+    noise : the frames' and readings' noise models the averages were made with (plain data, for the
+        result file), or None.
     """
 
     description: object
@@ -38,6 +40,7 @@ class Session:
     stamps: np.ndarray
     samples: np.ndarray = field(default=None)
     direction: np.ndarray = field(default=None)
+    noise: dict = field(default=None)
 
     def __post_init__(self):
         K = len(self.Theta)
@@ -61,7 +64,7 @@ class Session:
         """Return the rests selected by ``index`` (visit order is kept for a sorted index)."""
         return Session(self.description, self.Theta[index], self.sigma_Theta[index],
                        self.sphere[index], self.sphere_cov[index], self.stamps[index],
-                       self.samples[index], self.direction[index])
+                       self.samples[index], self.direction[index], self.noise)
 
     def measurements(self, camera_rotation=None):
         """

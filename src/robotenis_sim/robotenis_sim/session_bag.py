@@ -295,10 +295,10 @@ def _joint_states(t0, t1, Theta, times, spec, msgs, rngs):
 
 
 def jittered(t, spec, rng):
-    """Return the header stamps of samples taken at t: with the driver's jitter, in order."""
+    """Return the header stamps of samples taken at t, with the driver's jitter."""
     if not spec.stamp_jitter:
         return t
-    return np.maximum.accumulate(t + rng.normal(scale=spec.stamp_jitter, size=len(t)))
+    return t + rng.normal(scale=spec.stamp_jitter, size=len(t))
 
 
 def _rest(k, times, sphere, spec, msgs, rngs, radius):
