@@ -27,7 +27,8 @@ at least ``min_duration`` (default: one window). Its first seconds are skipped w
 signal still moves (vibrations of the robot and of the ball's holder that the joints do not show):
 the settle margin is found from the data (``settle_time``: pooled over the rests, the first time
 after the joints stop from which the frames scatter as the frames' noise alone about their rest's
-final position), or given (``settle``).
+final position), or given (``settle``); it never leaves a rest fewer than ``min_samples``
+frames.
 
 Averaging, per rest and over the same window for both sensors. The frames' noise is learned from
 all the rests at once (``FrameNoise``): along each optical axis a variance c_a (z / z_ref)^g_a
@@ -270,8 +271,14 @@ def found_windows(rec, params, notes):
     if settle is None:
         settle = settle_time(rec, periods)
         notes.append(f'settle margin found from the data: {settle:.3f} s after the joints stop')
-    t_first = rec.t_joint[0]
-    return [(a + settle, b, f'rest at {a - t_first:.1f} s') for a, b in periods if b > a + settle]
+    t_first, out = rec.t_joint[0], []
+    for a, b in periods:
+        # the margin never leaves a rest fewer frames than it needs: its last ones are the calmest
+        frames = rec.t_sphere[np.searchsorted(rec.t_sphere, a):np.searchsorted(rec.t_sphere, b,
+                                                                                side='right')]
+        latest = frames[-params.min_samples] if len(frames) >= params.min_samples else a
+        out.append((min(a + settle, latest), b, f'rest at {a - t_first:.1f} s'))
+    return out
 
 
 def settle_time(rec, periods, level=SETTLE_LEVEL):

@@ -1,6 +1,8 @@
 """Averaging one rest: the outlier gate rejects good samples at its level, and rejects outliers."""
 import numpy as np
+import pytest
 from robotenis_calibration import rests
+from robotenis_sim import session_bag
 from scipy import stats
 
 
@@ -24,3 +26,36 @@ def test_false_detections_are_rejected_and_the_mean_is_the_good_samples():
     mean, cov, keep = rests.robust_mean(x, np.full(3, 1e-12), 1e-3)
     assert not keep[[3, 17, 30]].any() and keep.sum() >= 36
     np.testing.assert_allclose(mean, x[keep].mean(axis=0))
+
+
+# Drivers' timings: joint states, camera, rests, moves, jitter, drops (some more in the benchmark)
+TIMINGS = {
+    '100Hz-60Hz-1s': dict(joint_rate=100.0, camera_rate=60.0, rest_time=1.0, move_time=(0.5, 0.0)),
+    '50Hz-15Hz-0.3s': dict(joint_rate=50.0, camera_rate=15.0, rest_time=0.3, move_time=(0.3, 0.5)),
+    '1kHz-120Hz-2s-jitter': dict(joint_rate=1000.0, camera_rate=120.0, rest_time=2.0,
+                                 move_time=(0.4, 1.0), stamp_jitter=0.0005),
+    '200Hz-30Hz-0.5s-drops': dict(joint_rate=200.0, camera_rate=30.0, rest_time=0.5,
+                                  move_time=(1.0, 0.0), drop_fraction=0.05, stamp_jitter=0.003),
+}
+
+
+@pytest.mark.parametrize('timing', list(TIMINGS))
+def test_rests_of_any_drivers_timing_are_found_and_average_to_the_truth(tmp_path, timing):
+    """
+    Check a bag another driver recorded (rosbags, no markers): the rests are used, and right.
+
+    At least 98 % of the rests are found and averaged; each average is the camera's mean
+    measurement within the noise the learned noise model gives it (chi-square of all rests, 1 %),
+    and likewise the readings.
+    """
+    bag = session_bag.write(tmp_path / 'bag', session_bag.BagSpec(
+        poses=50, seed=7, markers=False, **TIMINGS[timing]))
+    session, notes = rests.load_session(bag.path)
+    assert len(session) >= 0.98 * len(bag.Theta), notes
+    found = np.array([np.argmin(np.linalg.norm(bag.Theta - th, axis=1)) for th in session.Theta])
+    assert len(set(found)) == len(found)
+    d = session.sphere - bag.sphere[found]
+    chi2 = np.einsum('ki,kij,kj->', d, np.linalg.inv(session.sphere_cov), d)
+    assert chi2 < stats.chi2.ppf(0.99, d.size), notes
+    readings = np.sum(((session.Theta - bag.Theta[found]) / session.sigma_Theta) ** 2)
+    assert readings < stats.chi2.ppf(0.99, d.size)
