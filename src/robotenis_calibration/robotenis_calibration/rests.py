@@ -274,8 +274,8 @@ def found_windows(rec, params, notes):
     t_first, out = rec.t_joint[0], []
     for a, b in periods:
         # the margin never leaves a rest fewer frames than it needs: its last ones are the calmest
-        frames = rec.t_sphere[np.searchsorted(rec.t_sphere, a):np.searchsorted(rec.t_sphere, b,
-                                                                                side='right')]
+        i0, i1 = np.searchsorted(rec.t_sphere, a), np.searchsorted(rec.t_sphere, b, side='right')
+        frames = rec.t_sphere[i0:i1]
         latest = frames[-params.min_samples] if len(frames) >= params.min_samples else a
         out.append((min(a + settle, latest), b, f'rest at {a - t_first:.1f} s'))
     return out

@@ -30,12 +30,15 @@ def test_false_detections_are_rejected_and_the_mean_is_the_good_samples():
 
 # Drivers' timings: joint states, camera, rests, moves, jitter, drops (some more in the benchmark)
 TIMINGS = {
-    '100Hz-60Hz-1s': dict(joint_rate=100.0, camera_rate=60.0, rest_time=1.0, move_time=(0.5, 0.0)),
-    '50Hz-15Hz-0.3s': dict(joint_rate=50.0, camera_rate=15.0, rest_time=0.3, move_time=(0.3, 0.5)),
-    '1kHz-120Hz-2s-jitter': dict(joint_rate=1000.0, camera_rate=120.0, rest_time=2.0,
-                                 move_time=(0.4, 1.0), stamp_jitter=0.0005),
-    '200Hz-30Hz-0.5s-drops': dict(joint_rate=200.0, camera_rate=30.0, rest_time=0.5,
-                                  move_time=(1.0, 0.0), drop_fraction=0.05, stamp_jitter=0.003),
+    '100Hz-60Hz-1s': {'joint_rate': 100.0, 'camera_rate': 60.0, 'rest_time': 1.0,
+                      'move_time': (0.5, 0.0)},
+    '50Hz-15Hz-0.3s': {'joint_rate': 50.0, 'camera_rate': 15.0, 'rest_time': 0.3,
+                       'move_time': (0.3, 0.5)},
+    '1kHz-120Hz-2s-jitter': {'joint_rate': 1000.0, 'camera_rate': 120.0, 'rest_time': 2.0,
+                             'move_time': (0.4, 1.0), 'stamp_jitter': 0.0005},
+    '200Hz-30Hz-0.5s-drops': {'joint_rate': 200.0, 'camera_rate': 30.0, 'rest_time': 0.5,
+                              'move_time': (1.0, 0.0), 'drop_fraction': 0.05,
+                              'stamp_jitter': 0.003},
 }
 
 
