@@ -63,9 +63,8 @@ PARAMETERS = {
     'num_poses': (300, 'poses of a session (a request may ask for others)'),
     'frames_per_pose': (500, 'detections averaged per rest'),
     'settle_time': (4.0, "s waited at rest before measuring (the paper's 4 s)"),
-    'holdout_fraction': (0.3, 'share of the rests held out to test the calibration'),
-    'detector_floor': ([5e-4, 3e-3], "the detector's systematic error (lateral, depth) as "
-                                     'fractions of the range: pipeline.with_detector_floor'),
+    'holdout_fraction': (pipeline.Settings.holdout_fraction,
+                         'share of the rests held out to test the calibration'),
     'image_topic': ('camera/image_raw', 'the images whose first frames of each rest are kept'),
     'images_per_pose': (2, 'images kept per rest, as PNG'),
 }
@@ -257,11 +256,11 @@ class CalibrationNode(Node):
         skipped = list(self.runner.skipped)
         self.close_bag()
         response.bag_path = bag
+        settings = pipeline.Settings(self.get_parameter('holdout_fraction').value, request.seed)
         outcome = pipeline.calibrate_bag(
-            bag, result_path, self.get_parameter('holdout_fraction').value, request.seed,
+            bag, result_path, settings,
             progress=lambda text: self.publish_progress('identifying', len(planned) - 1,
-                                                        len(planned), 1.0, text),
-            detector_floor=tuple(self.get_parameter('detector_floor').value))
+                                                        len(planned), 1.0, text))
         d = outcome.diagnosis
         response.success = True
         response.message = (f'{len(planned) - len(skipped)} of {len(planned)} poses measured; '

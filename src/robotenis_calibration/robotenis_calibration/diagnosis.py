@@ -1,41 +1,73 @@
 """
 The residual loop: find what the model lacks, add it, and prove it helped on held-out poses.
 
-1. Fit the paper's 15 parameters on the training poses; hold the rest out.
-2. Test the residuals: their chi-square against the propagated noise (size), and, for every
-   candidate effect, a score (Lagrange multiplier) test: with Q_c an orthonormal basis of the
-   candidate's whitened columns after the current model's columns are projected out, the statistic
-   |Q_c^T r_w|^2 follows chi2(q) when the effect is absent.
-3. Take the most significant candidate (Bonferroni over the candidates left), keeping only its
-   parameters that are identifiable together with the rest (their projected columns must not
-   vanish: H_i beside h_i does), and refit.
-4. Keep it only if the fit improves significantly (likelihood ratio, chi2(q)) and the held-out
-   poses do too (one-sided paired t-test of their per-pose chi-square contributions, before against
-   after); repeat until no candidate is significant.
-5. If the residuals are still too large, a generic fallback tests their correlation with what could
-   explain them (joint angle, motion direction, gravity torque, image position, time) and flags it.
+1. Fit the paper's 15 parameters on the training poses together with the rests' error floor
+   (robotenis_kinematics.variance: what each rest gets wrong beyond its frames' spread, learned by
+   REML); hold the other poses out.
+2. Test the residuals for every candidate: the named effects (``NAMED``) and the two generic ones
+   (``GENERIC``: harmonics in each joint's angle, a polynomial field of the camera's coordinates,
+   for effects no library names), with a score (Lagrange multiplier) test: with Q_c an orthonormal
+   basis of the candidate's whitened columns after the current model's columns are projected out,
+   |Q_c^T r_w|^2 follows chi2(q) when the effect is absent. The Jacobian is taken at the
+   observations adjusted to the current fit (``identification.adjusted``), whose error is
+   uncorrelated with the residuals: at the measurements it shares their noise, and a smooth
+   field's columns, once the model's are projected out, would be mostly that noise. A generic
+   candidate's size (the harmonics' orders, the field's degree) is chosen first by K-fold
+   cross-validation on the training poses only, never on the held-out ones.
+3. Take the most significant named candidate if one is significant (Bonferroni over the
+   candidates left), else the most significant generic one, keeping only its parameters that are
+   identifiable together with the rest (H_i beside h_i is not), and refit.
+4. Keep it only if the fit improves significantly (likelihood ratio, chi2(q), at the current
+   floor) and the held-out poses do too (one-sided paired t-test of their per-pose chi-square,
+   before against after). A named effect is then confronted with the generic ones (encompassing
+   score tests: does each add to the other?): it is claimed only if no generic model adds to it;
+   if a generic adds and the name adds nothing to the generic, the generic stands and the name
+   is dropped (a library effect that explains a part of an unknown one is not that effect); if
+   each adds to the other, the generic stands and the name must still add on top of it in a
+   later round to be claimed. After each effect kept the floor is learned again; repeat until
+   no candidate is left significant.
+5. The held-out poses then test the whole model and floor: their chi-square against chi2(3K)
+   (with the fitted parameters' own error in the predictive covariance). If it is too large, a
+   fallback tests the residuals' correlation with what could explain them (joint angle, motion
+   direction, gravity torque, image position, range, time) and flags it.
 
-All tests run at the significance level ``ALPHA`` (per decision, Bonferroni-corrected where several
-candidates compete), so on data with no effect the loop claims one in about ALPHA of sessions.
+Every decision runs at the significance level ``ALPHA`` (Bonferroni-corrected where candidates
+compete) and needs three tests to pass, so on data with no effect the loop claims one in far fewer
+than ALPHA of the sessions.
 """
 from dataclasses import dataclass, field
 
 import numpy as np
-from robotenis_kinematics import delta, effects
+from robotenis_kinematics import delta, effects, variance
 from robotenis_kinematics import identification as idf
 from scipy import stats
 
 ALPHA = 0.01
-CANDIDATES = ('joint_scale', 'base_geometry', 'hand_eye_rotation', 'backlash',
-              'gravity_compliance')
+NAMED = ('joint_scale', 'base_geometry', 'hand_eye_rotation', 'backlash', 'gravity_compliance')
+GENERIC = ('joint_harmonics', 'camera_field')
+CANDIDATES = NAMED + GENERIC
+ORDERS = tuple(range(1, 9))     # harmonics of a joint's angle a short series may pick
+MAX_ORDERS = 4                  # the series' length at most
+DEGREES = (1, 2, 3)             # of the camera field
+FOLDS = 5
 FEATURES = ('joint angle', 'joint angle squared', 'motion direction', 'gravity torque', 'range',
             'image x', 'image y', 'time')
 
 
-def candidate_parameters(name):
-    """Parameter names a candidate proposes (before the identifiability check)."""
+def generic_terms(name, size):
+    """Return the effect terms of a generic candidate: its orders (a tuple), or its degree."""
+    if name == 'joint_harmonics':
+        return effects.joint_term_names(size)
+    return effects.camera_term_names(size)
+
+
+def candidate_parameters(name, size=None):
+    """Return the parameter names a candidate proposes (before the identifiability check)."""
     if name == 'base_geometry':
         return ('H1', 'H2', 'H3', 'phi1', 'phi2', 'phi3')
+    if name in GENERIC:
+        return tuple(p for term in generic_terms(name, size) for p in idf.effect_names(term)
+                     if p not in effects.UNSEEN)
     return idf.effect_names(name)
 
 
@@ -51,6 +83,7 @@ class CandidateTest:
     p_value: float
     # Wilson-Hilferty normal score of the statistic: ranks candidates where p underflows.
     z: float
+    size: object = None      # a generic candidate's orders or degree, chosen by cross-validation
 
 
 @dataclass
@@ -65,6 +98,7 @@ class Step:
     lr_p_value: float = 1.0
     holdout_p_value: float = 1.0
     reason: str = ''
+    generic_p_value: float = None   # p of the generic rivals adding to the named effect
 
 
 @dataclass
@@ -80,64 +114,154 @@ class Diagnosis:
     size_test: dict
     errors_mm: dict                 # held-out RMS 3D error per model: nominal, plain, final
     holdout_chi2: dict
+    floor: variance.Floor = None    # the rests' error floor learned with the final model
     fallback: list = field(default_factory=list)
+    sizes: dict = field(default_factory=dict)     # generic effect -> orders or degree kept
+    correlates: dict = field(default_factory=dict)  # generic effect -> generic_correlations
 
 
-def with_candidate(model, name):
-    """Return the model with a candidate's parameters present at zero effect."""
-    if effects.is_effect(name) and name not in model.effects:
-        return idf.Model(model.desc, model.P0, {**model.effects, name: np.zeros(3)})
-    return model
+def with_candidate(model, name, size=None):
+    """Return the model with a candidate's terms present at zero effect."""
+    terms = generic_terms(name, size) if name in GENERIC else (name,)
+    fresh = {t: np.zeros(3) for t in terms if effects.is_effect(t) and t not in model.effects}
+    return idf.Model(model.desc, model.P0, {**model.effects, **fresh}) if fresh else model
 
 
-def score_test(result, meas, name, rtol=1e-6):
-    """Score test of candidate ``name`` at the fitted ``result`` (see the module docstring)."""
-    proposed = tuple(n for n in candidate_parameters(name) if n not in result.names)
-    model = with_candidate(result.model, name)
-    r_w, J_w = idf.whitened_problem(model, meas, result.names + proposed)
-    p = len(result.names)
-    Q, _ = np.linalg.qr(J_w[:, :p])
-    Jc = J_w[:, p:]
-    perp = Jc - Q @ (Q.T @ Jc)
-    keep, basis = [], np.zeros((len(r_w), 0))
-    # Gram-Schmidt in order: a column that adds nothing is dropped.
-    for j, n in enumerate(proposed):
+def candidate_problem(result, meas, name, size=None):
+    """
+    Return (proposed names, r_w, J_w) at the current fit with the candidate's terms at zero.
+
+    Both in the Gauss-Helmert form (at the adjusted observations, see the module docstring); the
+    Jacobian holds the fit's parameters, then the candidate's.
+    """
+    proposed = tuple(n for n in candidate_parameters(name, size) if n not in result.names)
+    model = with_candidate(result.model, name, size)
+    r_w, J_w = idf.whitened_problem(model, meas, result.names + proposed, adjust=True)
+    return proposed, r_w, J_w
+
+
+def identifiable(J, p, rtol=1e-6):
+    """
+    Return (kept column indices beyond the first p, orthonormal basis of what they add).
+
+    Gram-Schmidt in order on J's columns after the first p are projected out: a column that adds
+    less than ``rtol`` of its norm depends on the others and is dropped.
+    """
+    Q, _ = np.linalg.qr(J[:, :p])
+    C = J[:, p:]
+    perp = C - Q @ (Q.T @ C)
+    keep, basis = [], np.zeros((len(C), 0))
+    for j in range(C.shape[1]):
         v = perp[:, j] - basis @ (basis.T @ perp[:, j])
-        if np.linalg.norm(v) > rtol * np.linalg.norm(Jc[:, j]):
-            keep.append(n)
-            basis = np.column_stack([basis, v / np.linalg.norm(v)])
-    dropped = tuple(n for n in proposed if n not in keep)
+        v = v - basis @ (basis.T @ v)        # twice: orthogonal to working precision
+        size = np.linalg.norm(v)
+        if size > rtol * np.linalg.norm(C[:, j]):
+            keep.append(j)
+            basis = np.column_stack([basis, v / size])
+    return keep, basis
+
+
+def score_test(result, meas, name, size=None):
+    """Score test of candidate ``name`` at the fitted ``result`` (see the module docstring)."""
+    proposed, r_w, J_w = candidate_problem(result, meas, name, size)
+    keep, basis = identifiable(J_w, len(result.names))
+    kept = tuple(proposed[j] for j in keep)
+    dropped = tuple(n for n in proposed if n not in kept)
     stat = float(np.sum((basis.T @ r_w) ** 2))
-    q = len(keep)
+    q = len(kept)
     if not q:
-        return CandidateTest(name, (), dropped, 0.0, 0, 1.0, -np.inf)
-    return CandidateTest(name, tuple(keep), dropped, stat, q, float(stats.chi2.sf(stat, q)),
-                         wilson_hilferty(stat, q))
+        return CandidateTest(name, (), dropped, 0.0, 0, 1.0, -np.inf, size)
+    return CandidateTest(name, kept, dropped, stat, q, float(stats.chi2.sf(stat, q)),
+                         wilson_hilferty(stat, q), size)
 
 
 def wilson_hilferty(x, k):
     """
-    Return the normal score of a chi2(k) value x; monotone in p.
+    Return the normal score of a chi2(k) value x, monotone in its p-value.
 
-    z = ((x/k)^(1/3) - 1 + 2/(9k)) / sqrt(2/(9k)).
+    ((x / k)^(1/3) - 1 + 2 / (9 k)) / sqrt(2 / (9 k)).
     """
     return float(((x / k) ** (1 / 3) - 1 + 2 / (9 * k)) / np.sqrt(2 / (9 * k)))
 
 
+def cross_validated_size(result, meas, name, rng, folds=FOLDS):
+    """
+    Return the size of a generic candidate that predicts left-out training rests best, or None.
+
+    Linearised at the current fit: a size's whitened residuals are fitted on the current
+    parameters and the candidate's terms with one fold of the rests left out, and the left-out
+    fold predicted. The joint harmonics pick their orders one at a time (forward selection, at
+    most MAX_ORDERS), the camera field its degree; None (no term) wins unless a size predicts
+    better.
+    """
+    largest = ORDERS if name == 'joint_harmonics' else DEGREES[-1]
+    proposed, r_w, J_w = candidate_problem(result, meas, name, largest)
+    p = len(result.names)
+    names = result.names + tuple(proposed[j] for j in identifiable(J_w, p)[0])
+    J_w = J_w[:, [(result.names + proposed).index(n) for n in names]]
+    cv = _FoldedProblem(r_w, J_w, np.repeat(rng.permutation(len(meas)) % folds, 3), folds)
+
+    def error(size):
+        extra = () if size is None else candidate_parameters(name, size)
+        return cv.error(list(range(p)) + [names.index(n) for n in extra if n in names])
+    best, best_error = None, error(None)
+    if name == 'camera_field':
+        for degree in DEGREES:
+            e = error(degree)
+            if e < best_error:
+                best, best_error = degree, e
+        return best
+    chosen = ()
+    while len(chosen) < MAX_ORDERS:
+        trials = {n: error(tuple(sorted(chosen + (n,)))) for n in ORDERS if n not in chosen}
+        n = min(trials, key=trials.get)
+        if trials[n] >= best_error:
+            break
+        chosen, best_error = tuple(sorted(chosen + (n,))), trials[n]
+    return chosen or None
+
+
+class _FoldedProblem:
+    """
+    A linear least-squares problem r ~ J x split in folds, for K-fold prediction errors.
+
+    Each fold's normal equations (columns scaled to unit norm) are summed once, so the prediction
+    error of any subset of columns costs a few small solves, not a factorisation of J per fold.
+    """
+
+    def __init__(self, r, J, fold, folds):
+        scale = np.linalg.norm(J, axis=0)
+        J = J / np.where(scale > 0, scale, 1.0)
+        parts = [fold == f for f in range(folds)]
+        self.G = np.array([J[o].T @ J[o] for o in parts])
+        self.b = np.array([J[o].T @ r[o] for o in parts])
+        self.rr = np.array([r[o] @ r[o] for o in parts])
+
+    def error(self, columns):
+        """Return the sum over folds of the squared prediction errors of the left-out fold."""
+        S = np.ix_(columns, columns)
+        G_all, b_all = self.G.sum(axis=0)[S], self.b.sum(axis=0)[columns]
+        total = 0.0
+        for G, b, rr in zip(self.G, self.b, self.rr):
+            x = np.linalg.solve(G_all - G[S], b_all - b[columns])
+            total += rr - 2 * b[columns] @ x + x @ G[S] @ x
+        return float(total)
+
+
 def pose_chi2(model, meas):
-    """Per-pose chi-square contributions Gamma_k^T Sigma_k^-1 Gamma_k (K,) of a model."""
+    """Return the per-pose chi-square contributions Gamma_k^T Sigma_k^-1 Gamma_k (K,)."""
     r_w = idf.whitened_problem(model, meas, ())[0]
     return np.sum(r_w.reshape(-1, 3) ** 2, axis=1)
 
 
 def position_errors(model, meas):
     """
-    Return the 3D distance (K,), m, between the effector positions of the model and the camera.
+    Return the 3D distance (K,) between the model's effector and the camera's, m.
 
-    That is, between where the model puts the effector (FK of its arm angles) and where the camera
-    saw it (P0 + Pi_k).
+    The model's is the FK of its arm angles; the camera's is P0 + Pi_k.
     """
-    Pi = effects.camera_increments(model.effects, meas.Pi, model.desc.camera_rotation)
+    Pi = effects.camera_increments(model.effects, meas.Pi, model.desc.camera_rotation,
+                                   meas.Pi_basis)
     P_seen = model.P0 + Pi
     theta, _ = effects.model_joint_angles(model.desc, model.effects, meas.Theta, meas.direction,
                                           P_seen)
@@ -145,14 +269,14 @@ def position_errors(model, meas):
 
 
 def split(K, holdout_fraction, rng):
-    """Random train / held-out split of K poses; both sorted (visit order kept)."""
+    """Split K poses at random into train and held-out; both sorted (visit order kept)."""
     order = rng.permutation(K)
     n_hold = int(round(holdout_fraction * K))
     return np.sort(order[n_hold:]), np.sort(order[:n_hold])
 
 
 def correlations(model, meas, features):
-    """Correlation of each leg's whitened residual with each feature: [(feature, leg, r, p)]."""
+    """Return the correlation of each leg's whitened residual with each feature, as tuples."""
     r_w = idf.whitened_problem(model, meas, ())[0].reshape(-1, 3)
     out = []
     for fname, values in features.items():
@@ -166,7 +290,7 @@ def correlations(model, meas, features):
 
 
 def residual_features(model, meas, sphere, stamps):
-    """Return what a residual may correlate with, per pose (and per joint where it applies)."""
+    """Return, per pose (and per joint where it applies), what a residual may correlate with."""
     theta = model.desc.theta0 + meas.Theta
     P = model.P0 + meas.Pi
     return {
@@ -181,6 +305,180 @@ def residual_features(model, meas, sphere, stamps):
     }
 
 
+def generic_error(model, meas, name):
+    """
+    Return the error (K, 3) a fitted generic effect models at each pose, and what it is along.
+
+    joint_harmonics: the arm angle error of each joint (rad); camera_field: the measurement
+    error of the sphere centre along each optical axis (m).
+    """
+    if name == 'joint_harmonics':
+        terms = {t: v for t, v in model.effects.items() if effects.JOINT_TERM.match(t)}
+        theta = effects.model_joint_angles(model.desc, terms, meas.Theta, meas.direction, None)[0]
+        return theta - model.desc.theta0 - meas.Theta, 'joint'
+    sphere = -meas.Pi_basis @ model.desc.camera_rotation
+    return sum(np.outer(effects.camera_basis(t, sphere), v) for t, v in model.effects.items()
+               if effects.is_camera_term(t)), 'axis'
+
+
+def generic_correlations(model, meas, sphere, stamps, name, top=3):
+    """
+    Return what a fitted generic effect's error correlates with: [(feature, component, r)].
+
+    The strongest ``top`` correlations over the poses between each component of its error
+    (joint 1-3 or optical axis x, y, z) and the residual features (a joint's own feature for a
+    joint's error).
+    """
+    error, kind = generic_error(model, meas, name)
+    out = []
+    for fname, values in residual_features(model, meas, sphere, stamps).items():
+        for c in range(3):
+            f = values[:, c] if values.ndim == 2 else values
+            if values.ndim == 2 and kind == 'axis' or np.ptp(f) == 0 or np.ptp(error[:, c]) == 0:
+                continue
+            label = f'joint {c + 1}' if kind == 'joint' else f'optical {"xyz"[c]}'
+            out.append((fname, label, float(np.corrcoef(f, error[:, c])[0, 1])))
+    return sorted(out, key=lambda t: -abs(t[2]))[:top]
+
+
+def holdout_test(result, floor, meas, R):
+    """
+    Return the held-out poses' chi-square, its dof and p-value, under the fit and its floor.
+
+    The predictive covariance of each held-out residual adds the fitted parameters' own error,
+    J C J^T, to the rests' (frames and floor).
+    """
+    r, J = idf.whitened_problem(result.model, floor.widen(meas, R), result.names)
+    predictive = np.eye(len(r)) + J @ result.covariance @ J.T
+    chi2 = float(r @ np.linalg.solve(predictive, r))
+    return chi2, len(r), float(stats.chi2.sf(chi2, len(r)))
+
+
+class _Loop:
+    """The state of one run: the split, the current fit and floor, the steps so far."""
+
+    def __init__(self, declared, meas, holdout_fraction, seed, alpha, say):
+        self.rng = np.random.default_rng(seed)
+        self.train, self.hold = split(len(meas), holdout_fraction, self.rng)
+        self.m_train, self.m_hold = meas.subset(self.train), meas.subset(self.hold)
+        self.R, self.alpha, self.say = declared.camera_rotation, alpha, say
+        self.start = idf.initial_model(declared, self.m_train)
+        say("fitting the plain 15-parameter model and the rests' error floor")
+        self.plain, self.floor = variance.identify(self.start, self.m_train)
+        self.current, self.steps, self.found, self.sizes = self.plain, [], [], {}
+
+    def widened(self, meas):
+        return self.floor.widen(meas, self.R)
+
+    def fit(self, test):
+        """Return the current model with a tested candidate's identifiable parameters, fitted."""
+        return idf.identify(with_candidate(self.current.model, test.name, test.size),
+                            self.widened(self.m_train), self.current.names + test.parameters)
+
+    def compare(self, before, after):
+        """Return the one-sided p-value that ``after`` fits the held-out poses better."""
+        hold = self.widened(self.m_hold)
+        return float(stats.ttest_rel(pose_chi2(before.model, hold), pose_chi2(after.model, hold),
+                                     alternative='greater').pvalue)
+
+    def tests(self, remaining):
+        """Return the score tests of the candidates left (generic ones at their CV size)."""
+        train = self.widened(self.m_train)
+        out = []
+        for name in remaining:
+            if name in GENERIC:
+                size = cross_validated_size(self.current, train, name, self.rng)
+                if size is not None:
+                    out.append(score_test(self.current, train, name, size))
+            else:
+                out.append(score_test(self.current, train, name))
+        return out
+
+    def step(self, remaining):
+        """Run one round; return the candidates it used up (None to stop)."""
+        tests = self.tests(remaining)
+        if not tests:
+            return None
+        significant = [t for t in tests if t.p_value < self.alpha / len(tests)]
+        # a name first: the most significant named effect, if any is, a generic one challenges it
+        named = [t for t in significant if t.name in NAMED]
+        best = max(named or tests, key=lambda t: t.z)
+        step = Step(tests, best.name, chi2_before=self.current.chi2)
+        self.steps.append(step)
+        if not significant:
+            smallest = min(t.p_value for t in tests)
+            step.reason = f'no candidate significant (smallest p = {smallest:.3g})'
+            return None
+        self.say(f'adding {best.name} ({", ".join(best.parameters)})')
+        trial = self.fit(best)
+        step.chi2_after = trial.chi2
+        step.lr_p_value = float(stats.chi2.sf(self.current.chi2 - trial.chi2, best.dof))
+        step.holdout_p_value = self.compare(self.current, trial)
+        if not (step.lr_p_value < self.alpha and step.holdout_p_value < self.alpha):
+            step.reason = 'rejected: no significant improvement ' + \
+                ('on the held-out poses' if step.lr_p_value < self.alpha else 'of the fit')
+            return [best.name]
+        name, size, used = best.name, best.size, [best.name]
+        if name in NAMED:
+            name, size, trial, used = self.attribute(step, best, trial, tests)
+            if name is None:
+                return used
+        step.kept = True
+        step.reason = step.reason or 'fit and held-out poses improved significantly'
+        self.accept(name, size, trial)
+        return used
+
+    def attribute(self, step, best, trial, tests):
+        """
+        Return (effect or None, size, fit, candidates used up) for a named effect that helped.
+
+        Encompassing tests on the training poses, for each generic rival: does the generic add to
+        the named effect (score test at the named fit, its size chosen again by cross-validation
+        there: what is left that it would model), and does the named effect add to the generic
+        (score test at the generic fit)? If no generic adds, the named effect explains what they
+        would: it is claimed, a name with fewer parameters. If a generic adds and the name adds
+        nothing to it, the name explains only a part of what the generic explains: the name is
+        not claimed, and the generic stands if it improves the held-out poses (else neither
+        does). If each adds to the other the evidence is ambiguous: the generic stands if it
+        improves the held-out poses, and the name stays a candidate, to be claimed only if it
+        still adds on top of it.
+        """
+        train = self.widened(self.m_train)
+        for rival in sorted((t for t in tests if t.name in GENERIC), key=lambda t: -t.z):
+            left = cross_validated_size(trial, train, rival.name, self.rng)
+            adds = 1.0 if left is None else score_test(trial, train, rival.name, left).p_value
+            step.generic_p_value = adds if step.generic_p_value is None else \
+                min(adds, step.generic_p_value)
+            if adds >= self.alpha:
+                continue
+            generic = self.fit(rival)
+            named_adds = score_test(generic, train, best.name).p_value
+            confirmed = self.compare(self.current, generic) < self.alpha
+            evidence = (f'{rival.name} adds to {best.name} (p = {adds:.3g}), {best.name} adds '
+                        f'{"nothing " if named_adds >= self.alpha else ""}to {rival.name} '
+                        f'(p = {named_adds:.3g})')
+            if named_adds >= self.alpha:
+                step.chosen = rival.name if confirmed else best.name
+                step.reason = (f'{best.name} helped, but {evidence}: {best.name} is not claimed'
+                               + ('' if confirmed else f', and {rival.name} does not improve '
+                                  'the held-out poses'))
+                return ((rival.name, rival.size, generic, [best.name, rival.name]) if confirmed
+                        else (None, None, None, [best.name]))
+            if confirmed:
+                step.chosen = rival.name
+                step.reason = (f'{best.name} helped, but {evidence}: ambiguous, {rival.name} '
+                               f'stands and {best.name} must add to it to be claimed')
+                return rival.name, rival.size, generic, [rival.name]
+        return best.name, None, trial, [best.name]
+
+    def accept(self, name, size, trial):
+        self.found.append(name)
+        if size:
+            self.sizes[name] = size
+        self.current, self.floor = variance.identify(trial.model, self.m_train, trial.names,
+                                                     self.floor)
+
+
 def run(declared, meas, sphere, stamps, holdout_fraction=0.3, seed=0, alpha=ALPHA, progress=None):
     """
     Run the residual loop on one session (see the module docstring).
@@ -190,64 +488,51 @@ def run(declared, meas, sphere, stamps, holdout_fraction=0.3, seed=0, alpha=ALPH
     declared : RobotDescription
         The description the session ran with (the nominal start).
     meas : Measurements
-        All rests, in visit order (Session.measurements()).
-    sphere, stamps : numpy.ndarray
-        (K, 3) camera-frame sphere centres and (K,) rest times, for the fallback.
+        All rests, in visit order (Session.measurements()), with their frames' covariances.
+    sphere : (K, 3) array
+        Camera-frame sphere centres, for the fallback.
+    stamps : (K,) array
+        Rest times, for the fallback.
     holdout_fraction : float
-        Share of the rests held out.
+        Share of the poses held out.
     seed : int
-        Seed of the random train / held-out split.
+        Seed of the split and of the cross-validation folds.
     alpha : float
-        Significance level of the tests.
+        Significance level of every decision.
     progress : callable or None
-        Called with a line of text as the loop goes.
+        Called with a line of text at each stage.
 
     """
-    rng = np.random.default_rng(seed)
-    train, hold = split(len(meas), holdout_fraction, rng)
-    m_train, m_hold = meas.subset(train), meas.subset(hold)
     say = progress or (lambda text: None)
-
-    start = idf.initial_model(declared, m_train)
-    nominal = idf.identify(start, m_train, ('P0x', 'P0y', 'P0z'))
-    say('fitting the plain 15-parameter model')
-    plain = idf.identify(start, m_train)
-    current, steps, found = plain, [], []
+    loop = _Loop(declared, meas, holdout_fraction, seed, alpha, say)
     remaining = list(CANDIDATES)
     while remaining:
-        tests = [score_test(current, m_train, name) for name in remaining]
-        best = max(tests, key=lambda t: t.z)
-        step = Step(tests, best.name, chi2_before=current.chi2)
-        steps.append(step)
-        if best.p_value >= alpha / len(tests):
-            step.reason = f'no candidate significant (smallest p = {best.p_value:.3g})'
+        used = loop.step(remaining)
+        if used is None:
             break
-        say(f'adding {best.name} ({", ".join(best.parameters)})')
-        trial = idf.identify(with_candidate(current.model, best.name), m_train,
-                             current.names + best.parameters)
-        step.chi2_after = trial.chi2
-        step.lr_p_value = float(stats.chi2.sf(current.chi2 - trial.chi2, best.dof))
-        before, after = pose_chi2(current.model, m_hold), pose_chi2(trial.model, m_hold)
-        step.holdout_p_value = float(stats.ttest_rel(before, after, alternative='greater').pvalue)
-        remaining.remove(best.name)
-        if step.lr_p_value < alpha and step.holdout_p_value < alpha:
-            step.kept, step.reason = True, 'fit and held-out poses improved significantly'
-            current = trial
-            found.append(best.name)
-        else:
-            step.reason = 'rejected: no significant improvement ' + \
-                ('on the held-out poses' if step.lr_p_value < alpha else 'of the fit')
-    size = {'chi2': current.chi2, 'dof': current.dof,
-            'p_value': float(stats.chi2.sf(current.chi2, current.dof)),
-            'plain_chi2': plain.chi2, 'plain_p_value': float(stats.chi2.sf(plain.chi2, plain.dof))}
+        remaining = [name for name in remaining if name not in used + loop.found]
+    return _diagnosis(loop, meas, sphere, stamps, alpha)
+
+
+def _diagnosis(loop, meas, sphere, stamps, alpha):
+    current, floor = loop.current, loop.floor
+    nominal = idf.identify(loop.start, floor.widen(loop.m_train, loop.R), ('P0x', 'P0y', 'P0z'))
+    chi2, dof, p = holdout_test(current, floor, loop.m_hold, loop.R)
+    size = {'chi2': chi2, 'dof': dof, 'p_value': p, 'train_chi2': current.chi2,
+            'train_dof': current.dof}
     fallback = []
-    if size['p_value'] < alpha:
-        feats = residual_features(current.model, m_train, sphere[train], np.asarray(stamps)[train])
-        tests = correlations(current.model, m_train, feats)
+    if p < alpha:
+        m_hold = floor.widen(loop.m_hold, loop.R)
+        feats = residual_features(current.model, m_hold, sphere[loop.hold],
+                                  np.asarray(stamps)[loop.hold])
+        tests = correlations(current.model, m_hold, feats)
         fallback = sorted((t for t in tests if t[3] < alpha / len(tests)), key=lambda t: t[3])
-    errors = {name: float(np.sqrt(np.mean(position_errors(r.model, m_hold) ** 2)) * 1e3)
-              for name, r in (('nominal', nominal), ('plain', plain), ('final', current))}
-    holdout_chi2 = {name: float(np.sum(pose_chi2(r.model, m_hold)))
-                    for name, r in (('nominal', nominal), ('plain', plain), ('final', current))}
-    return Diagnosis(plain, current, found, steps, train, hold, size, errors, holdout_chi2,
-                     fallback)
+    models = (('nominal', nominal), ('plain', loop.plain), ('final', current))
+    hold = floor.widen(loop.m_hold, loop.R)
+    errors = {name: float(np.sqrt(np.mean(position_errors(r.model, hold) ** 2)) * 1e3)
+              for name, r in models}
+    holdout_chi2 = {name: float(np.sum(pose_chi2(r.model, hold))) for name, r in models}
+    correlates = {name: generic_correlations(current.model, meas, sphere, stamps, name)
+                  for name in loop.found if name in GENERIC}
+    return Diagnosis(loop.plain, current, loop.found, loop.steps, loop.train, loop.hold, size,
+                     errors, holdout_chi2, floor, fallback, dict(loop.sizes), correlates)

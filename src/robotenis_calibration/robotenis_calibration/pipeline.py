@@ -2,20 +2,27 @@
 From a recorded session (a rosbag2 bag) to RESULT.yaml.
 
 This is the one path shared by the live calibration service and
-`./robotenis calibrate BAG_DIR --out RESULT.yaml`.
+`./robotenis calibrate BAG_DIR --out RESULT.yaml`, with the same defaults (``Settings``): the same
+bag gives the same result, and the result records the settings and the noise model it was made
+with, so that it can be reproduced from its bag alone.
 
-Nothing partial is ever written: the result and its residual plot are first written to temporary
-files beside them, and renamed only after the whole calibration succeeded (the plot first,
-RESULT.yaml last); a failed calibration leaves a previous result untouched.
+Nothing partial is ever written. The destination is checked before any work (a folder, a file
+that cannot be written: refused at once). The result and its residual plot are written to
+temporary files beside them and renamed only after the whole calibration succeeded, the plot
+first and RESULT.yaml last; if the second rename fails the first is undone, so either both
+appear or neither. A calibration whose held-out error is worse than the declared description's
+is refused (``force`` keeps it), and a failed or refused one leaves a previous result untouched.
 """
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, field
 import os
+import shlex
+import shutil
 import tempfile
 
-import numpy as np
-
 from robotenis_calibration import diagnosis, rests, result
+from robotenis_calibration.rests import RestParameters
 from robotenis_kinematics import description
+from robotenis_ros.names import JOINTS
 
 MIN_POSES = 20   # below this the 15 parameters plus a held-out set are not worth fitting
 
@@ -24,64 +31,109 @@ class CalibrationError(RuntimeError):
     """A calibration that could not be done; the message says why."""
 
 
+@dataclass(frozen=True)
+class Settings:
+    """Everything a calibration from a bag depends on besides the bag (the same everywhere)."""
+
+    holdout_fraction: float = 0.3
+    seed: int = 0
+    alpha: float = diagnosis.ALPHA
+    rests: RestParameters = field(default_factory=RestParameters)
+    joints: tuple = JOINTS
+    force: bool = False
+
+    def command(self, bag_dir, out_path):
+        """Return the command line that reproduces a calibration with these settings."""
+        args = ['./robotenis', 'calibrate', str(bag_dir), '--out', str(out_path),
+                '--holdout', str(self.holdout_fraction), '--seed', str(self.seed)]
+        if self.rests.settle is not None:
+            args += ['--settle', str(self.rests.settle)]
+        if tuple(self.joints) != JOINTS:
+            args += ['--joints', ','.join(self.joints)]
+        return shlex.join(args)
+
+
 @dataclass
 class Outcome:
+    """What a calibration from a bag made: the loop's diagnosis, the result, its files."""
+
     diagnosis: object
     description: object
     result_path: str
     plot_path: str
     notes: list
+    session: object = None     # the rests the bag gave
 
 
-def with_detector_floor(session, floor):
+def plot_path_for(out_path):
+    """Return the residual plot's path beside RESULT.yaml."""
+    return os.path.splitext(out_path)[0] + '-residuals.png'
+
+
+def check_destination(out_path):
     """
-    Return the session with each averaged sphere position's covariance widened.
+    Raise CalibrationError unless RESULT.yaml and its plot can be written where asked.
 
-    The widening is the detector's systematic error, which averaging frames does not shrink:
-    standard deviations ``floor`` = (lateral, depth) as fractions of the range z, along the optical
-    axes.
-
-    This project's conic detector is biased by about 0.3 % of the range in depth off the image
-    centre (``./robotenis bench vision``, lighting from the camera's side); its lateral share,
-    0.05 %, is what makes the chi-square per degree of freedom of a live session's fit about 1
-    (measured on the demo's session: 1.15). A driver whose detector is better known gives its own;
-    (0, 0) adds nothing.
+    Checked before any work: a folder given as the file, a folder that cannot be made, a
+    read-only folder or file are refused with the path named.
     """
-    lateral, depth = floor
-    if lateral < 0 or depth < 0:
-        raise ValueError(f'detector floor: fractions of the range must be >= 0, got {floor}')
-    z = np.abs(session.sphere[:, 2])
-    extra = np.zeros((len(z), 3, 3))
-    extra[:, 0, 0] = extra[:, 1, 1] = (lateral * z) ** 2
-    extra[:, 2, 2] = (depth * z) ** 2
-    widened = session.subset(np.arange(len(session)))
-    widened.sphere_cov = session.sphere_cov + extra
-    return widened
+    for path in (out_path, plot_path_for(out_path)):
+        if os.path.isdir(path):
+            raise CalibrationError(f'{path} is a folder: give the file to write')
+        folder = os.path.dirname(os.path.abspath(path))
+        try:
+            os.makedirs(folder, exist_ok=True)
+            probe = _temporary(path)
+        except OSError as e:
+            raise CalibrationError(f'cannot write {path}: {e.strerror or e}') from None
+        os.unlink(probe)
+        if os.path.exists(path) and not os.access(path, os.W_OK):
+            raise CalibrationError(f'cannot write {path}: it is read-only')
 
 
-def calibrate_session(session, holdout_fraction=0.3, seed=0, progress=None):
-    """Run the residual loop on a Session: (Diagnosis, Measurements), or raise CalibrationError."""
+def calibrate_session(session, settings=Settings(), progress=None):
+    """Return (Diagnosis, Measurements) of the residual loop on a Session; CalibrationError."""
     if len(session) < MIN_POSES:
-        raise CalibrationError(f'only {len(session)} usable rests in the session;'
-                               f' at least {MIN_POSES} are needed')
+        raise CalibrationError(f'only {len(session)} usable rests in the session; at least '
+                               f'{MIN_POSES} are needed')
     meas = session.measurements()
     try:
         d = diagnosis.run(session.description, meas, session.sphere, session.stamps,
-                          holdout_fraction, seed, progress=progress)
-    except np.linalg.LinAlgError as e:
-        raise CalibrationError(f'identification failed ({e}):'
-                               ' the rests do not determine the parameters') from e
+                          settings.holdout_fraction, settings.seed, settings.alpha,
+                          progress=progress)
+    except (ValueError, ArithmeticError) as e:
+        raise CalibrationError(f'identification failed ({e}): the rests do not determine the '
+                               'parameters') from e
     return d, meas
 
 
+def refuse_if_worse(d, force):
+    """Raise CalibrationError if the calibration predicts held-out poses worse than declared."""
+    before, after = d.errors_mm['nominal'], d.errors_mm['final']
+    if after > before and not force:
+        raise CalibrationError(f'the calibration is worse than the declared description on the '
+                               f'held-out poses ({after:.3f} mm against {before:.3f} mm): not '
+                               'written (--force keeps it)')
+
+
 def _temporary(path):
-    """Make an empty file beside ``path`` (same folder, for an atomic rename), readable by all."""
+    """Return a new empty file beside ``path`` (same folder: the rename is atomic), readable."""
     folder = os.path.dirname(os.path.abspath(path))
-    os.makedirs(folder, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix='.tmp-', suffix=os.path.splitext(path)[1], dir=folder)
     os.close(fd)
     os.chmod(tmp, 0o644)
     return tmp
+
+
+def _keep(path):
+    """Return a second name of ``path``'s current contents (a hard link, else a copy)."""
+    backup = _temporary(path)
+    os.unlink(backup)
+    try:
+        os.link(path, backup)
+    except OSError:
+        shutil.copy2(path, backup)
+    return backup
 
 
 def _write_text(text, path):
@@ -93,42 +145,68 @@ def _write_text(text, path):
 
 def write_together(writers):
     """
-    Write each {path: write(tmp_path)} to a temporary file, then rename them all in order.
+    Write each {path: write(tmp_path)} to a temporary file, then rename them all, in order.
 
-    On any failure no target is touched and the temporary files are removed.
+    On any failure no target is left changed: the files already renamed get their previous
+    contents back (a hard link kept them, so a target is never missing, not even for an instant)
+    or are removed if they are new, and the temporary files are removed.
     """
-    temporary = {}
+    temporary, kept, done = {}, {}, []
     try:
         for path, write in writers.items():
             temporary[path] = _temporary(path)
             write(temporary[path])
         for path, tmp in temporary.items():
+            if os.path.exists(path):
+                kept[path] = _keep(path)
             os.replace(tmp, path)
+            done.append(path)
+    except BaseException:
+        for path in done:
+            if path in kept:
+                os.replace(kept.pop(path), path)
+            else:
+                os.unlink(path)
+        raise
     finally:
-        for tmp in temporary.values():
+        for tmp in list(temporary.values()) + list(kept.values()):
             if os.path.exists(tmp):
                 os.unlink(tmp)
 
 
-def calibrate_bag(bag_dir, out_path, holdout_fraction=0.3, seed=0, params=rests.RestParameters(),
-                  progress=None, detector_floor=(0.0, 0.0)):
+def calibrate_bag(bag_dir, out_path, settings=Settings(), progress=None):
     """Read the bag, run the residual loop, write RESULT.yaml and the residual plot beside it."""
     say = progress or (lambda text: None)
+    check_destination(out_path)
     say(f'reading {bag_dir}')
     try:
-        session, notes = rests.load_session(bag_dir, params, progress=say)
+        session, notes = rests.load_session(bag_dir, settings.rests, progress=say,
+                                            joints=settings.joints)
     except (OSError, ValueError) as e:
         raise CalibrationError(str(e)) from e
     for note in notes:
         say(f'note: {note}')
     say(f'{len(session)} rests averaged')
-    session = with_detector_floor(session, detector_floor)
-    d, meas = calibrate_session(session, holdout_fraction, seed, progress=say)
+    d, meas = calibrate_session(session, settings, progress=say)
+    refuse_if_worse(d, settings.force)
     desc = result.calibrated_description(d, session.description)
-    desc.report['source'] = {'bag': os.path.abspath(bag_dir), 'notes': [str(n) for n in notes]}
-    plot_path = os.path.splitext(out_path)[0] + '-residuals.png'
+    desc.report['source'] = {'bag': os.path.abspath(bag_dir), 'notes': [str(n) for n in notes],
+                             'rests_used': len(session)}
+    desc.report['settings'] = _plain(asdict(settings))
+    desc.report['reproduce'] = settings.command(bag_dir, out_path)
+    desc.report['frame_noise'] = session.noise
+    plot_path = plot_path_for(out_path)
     text = description.dumps(desc)
     write_together({plot_path: lambda tmp: result.plot_residuals(d, meas, session.sphere,
                                                                  session.stamps, tmp),
                     out_path: lambda tmp: _write_text(text, tmp)})
-    return Outcome(d, desc, out_path, plot_path, list(notes))
+    return Outcome(d, desc, out_path, plot_path, list(notes), session)
+
+
+def _plain(value):
+    """Return settings as plain YAML data (tuples as lists)."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value

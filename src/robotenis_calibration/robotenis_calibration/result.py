@@ -26,7 +26,9 @@ def calibrated_description(diagnosis, declared):
         desc.camera_rotation = turn @ declared.camera_rotation
     for name in diagnosis.effects:
         entry = {'name': name}
-        if name == 'base_geometry':
+        if name in dg.GENERIC:
+            entry.update(_generic_entry(diagnosis, name))
+        elif name == 'base_geometry':
             for key in fx.BASE_GEOMETRY_KEYS:
                 names = [f'{key}{i}' for i in (1, 2, 3) if f'{key}{i}' in final.names]
                 if names:
@@ -41,6 +43,27 @@ def calibrated_description(diagnosis, declared):
         desc.effects.append(entry)
     desc.report = report(diagnosis)
     return desc
+
+
+def _generic_entry(diagnosis, name):
+    """Return the YAML entry of a generic effect: its terms, their standard deviations, meaning."""
+    final, size = diagnosis.final, diagnosis.sizes.get(name)
+    prefix = 'joint_' if name == 'joint_harmonics' else 'camera_'
+    terms = {t: v for t, v in final.model.effects.items()
+             if t.startswith(prefix) and fx.is_effect(t) and t not in fx.PARAMETERS}
+    entry = {'terms': {t[len(prefix):]: [float(x) for x in v] for t, v in terms.items()},
+             'terms_std': {t[len(prefix):]: [_std(final, f'{t}{i}') or 0.0 for i in (1, 2, 3)]
+                           for t in terms}}
+    if name == 'joint_harmonics':
+        entry['kind'] = ('an error of each arm angle periodic in that angle, orders '
+                         + ', '.join(str(n) for n in size))
+    else:
+        entry['reference_range'] = fx.CAMERA_REFERENCE_RANGE
+        entry['kind'] = (f'an error of the camera measurement, a polynomial of degree {size} in '
+                         'x/z_ref, y/z_ref, z/z_ref - 1')
+    entry['correlates'] = [{'feature': f, 'component': c, 'r': round(r, 3)}
+                           for f, c, r in diagnosis.correlates.get(name, [])]
+    return entry
 
 
 def _parameters(result):
@@ -62,12 +85,16 @@ def report(diagnosis):
             'chosen': step.chosen, 'kept': step.kept, 'reason': step.reason,
             'chi2_before': step.chi2_before, 'chi2_after': step.chi2_after,
             'likelihood_ratio_p': step.lr_p_value, 'holdout_p': step.holdout_p_value,
+            'generic_adds_p': step.generic_p_value,
         })
     return {
         'poses': {'train': int(len(diagnosis.train)), 'holdout': int(len(diagnosis.holdout))},
         'holdout_rms_error_mm': dict(diagnosis.errors_mm),
         'holdout_chi2': dict(diagnosis.holdout_chi2),
-        'residual_size_test': dict(diagnosis.size_test),
+        'holdout_test': dict(diagnosis.size_test),
+        'noise_floor': diagnosis.floor.as_dict() if diagnosis.floor else None,
+        'generic_sizes': {k: (list(v) if isinstance(v, tuple) else v)
+                          for k, v in diagnosis.sizes.items()},
         'effects_found': list(diagnosis.effects),
         'steps': steps,
         'unexplained_structure': [{'feature': f, 'joint': j, 'correlation': r, 'p_value': p}
@@ -85,31 +112,46 @@ def summary(diagnosis):
              f" plain 15-parameter {e['plain']:.3f} mm, "
              f"final {e['final']:.3f} mm ({len(diagnosis.holdout)} held-out poses)",
              f"effects found: {', '.join(diagnosis.effects) or 'none'}"]
+    for name, correlates in diagnosis.correlates.items():
+        size = diagnosis.sizes[name]
+        size = f"orders {', '.join(map(str, size))}" if name == 'joint_harmonics' else \
+            f'degree {size}'
+        found = ', '.join(f'{f} ({c}, r = {r:.2f})' for f, c, r in correlates)
+        lines.append(f'  {name} (generic, {size}) correlates with: {found}')
     for step in diagnosis.steps:
         tests = ', '.join(f'{t.name} {t.statistic:.1f}/{t.dof} (p={t.p_value:.2g})'
                           for t in step.tests)
         lines.append(f'  score tests: {tests}')
         lines.append(f'    -> {step.chosen}: {step.reason}')
     size = diagnosis.size_test
-    lines.append(f"residual size: chi2 {size['chi2']:.1f} for {size['dof']} dof"
-                 f" (p = {size['p_value']:.3g})")
+    lines.append(f"held-out poses: chi2 {size['chi2']:.1f} for {size['dof']} dof"
+                 f" (p = {size['p_value']:.3g}) under the final model and the rests' floor")
+    if diagnosis.floor is not None:
+        floor = ', '.join(_floor_text(name, value)
+                          for name, value in diagnosis.floor.variances.items() if value > 0)
+        lines.append(f"rests' error floor (REML): {floor or 'none beyond the frames'}")
     for f, j, r, p in diagnosis.fallback:
         lines.append(f'  UNEXPLAINED: joint {j} residual correlates with {f}'
                      f' (r = {r:.2f}, p = {p:.2g})')
     return lines
 
 
+def _floor_text(name, variance):
+    """Return a floor component as a standard deviation for a human (mm, mrad)."""
+    unit, scale = ('mrad', 1e3) if name == 'resolver' else ('mm', 1e3)
+    return f'{name} {np.sqrt(variance) * scale:.4f} {unit}'
+
+
 def plot_residuals(diagnosis, meas, sphere, stamps, path):
     """Plot the final model's whitened residuals against what they could correlate with (PNG)."""
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure    # no pyplot: no GUI backend, nothing global to close
 
     feats = dg.residual_features(diagnosis.final.model, meas, sphere, stamps)
     shown = ('joint angle', 'motion direction', 'gravity torque', 'image x', 'image y', 'time')
     plain = idf.whitened_problem(diagnosis.plain.model, meas, ())[0].reshape(-1, 3)
     final = idf.whitened_problem(diagnosis.final.model, meas, ())[0].reshape(-1, 3)
-    fig, axes = plt.subplots(2, len(shown), figsize=(4 * len(shown), 6.5), sharey='row')
+    fig = Figure(figsize=(4 * len(shown), 6.5))
+    axes = fig.subplots(2, len(shown), sharey='row')
     for col, name in enumerate(shown):
         values = feats[name]
         for row, (label, r) in enumerate((('plain 15-parameter', plain), ('final', final))):
@@ -124,6 +166,6 @@ def plot_residuals(diagnosis, meas, sphere, stamps, path):
     axes[0, 0].legend(fontsize=7)
     fig.suptitle('Residuals against what they may correlate with'
                  ' (whitened: unit variance if the model is right)')
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
+    # fixed margins: tight_layout would measure every label, most of the plot's time
+    fig.subplots_adjust(left=0.05, right=0.99, bottom=0.09, top=0.92, wspace=0.12, hspace=0.3)
+    fig.savefig(path, dpi=80, format='png')

@@ -7,8 +7,13 @@ robotenis_sim.session_bag).
 Tolerances are chi-square quantiles at 1 - 1e-3 of the stated noise, so each check fails by chance
 about once in a thousand runs at most.
 """
+import dataclasses
 import os
 import shutil
+import signal
+import subprocess
+import sys
+import types
 
 from mcap.records import Message
 from mcap.stream_reader import StreamReader
@@ -274,15 +279,87 @@ def test_joint_states_serialized_by_rclpy_are_read(tmp_path):
     assert reader.notes == []
 
 
-def test_detector_floor_widens_only_the_camera_covariance():
-    from robotenis_calibration.session import Session
-    from robotenis_kinematics import description
-    s = Session(description.nominal(), np.zeros((2, 3)), 1e-5,
-                np.array([[0.0, 0.0, 0.2], [0.01, 0.0, 0.4]]), np.eye(3) * 1e-12, [0.0, 1.0])
-    w = pipeline.with_detector_floor(s, (5e-4, 3e-3))
-    np.testing.assert_allclose(np.diagonal(w.sphere_cov, axis1=1, axis2=2),
-                               1e-12 + np.array([[1e-4 ** 2, 1e-4 ** 2, 6e-4 ** 2],
-                                                 [2e-4 ** 2, 2e-4 ** 2, 1.2e-3 ** 2]]))
-    np.testing.assert_array_equal(s.sphere_cov, np.eye(3)[None] * 1e-12 * np.ones((2, 1, 1)))
-    with pytest.raises(ValueError, match='detector floor'):
-        pipeline.with_detector_floor(s, (-1.0, 0.0))
+def test_sqlite_bags_give_what_mcap_bags_give(tmp_path):
+    spec = bag_sim.BagSpec(poses=40, seed=5, markers=False, joint_rate=100.0, camera_rate=30.0)
+    sessions = [rests.load_session(bag_sim.write(tmp_path / storage, dataclasses.replace(
+        spec, storage=storage)).path)[0] for storage in ('mcap', 'sqlite3')]
+    assert list((tmp_path / 'sqlite3').glob('*.db3'))
+    np.testing.assert_array_equal(sessions[0].Theta, sessions[1].Theta)
+    np.testing.assert_array_equal(sessions[0].sphere, sessions[1].sphere)
+
+
+def test_other_joint_names_are_named_and_mapped(tmp_path):
+    bag = bag_sim.write(tmp_path / 'bag', bag_sim.BagSpec(poses=12, seed=2,
+                                                          joints=('j_a', 'j_b', 'j_c')))
+    with pytest.raises(ValueError, match=r'names found: j_a, j_b, j_c.*--joints'):
+        rests.load_session(bag.path)
+    session, _ = rests.load_session(bag.path, joints=('j_a', 'j_b', 'j_c'))
+    assert len(session) == 12
+
+
+def test_several_descriptions_the_first_is_used_and_the_others_noted(clean, tmp_path):
+    other = description.dumps(description.load(description.config_path(
+        'table1_calibrated.yaml')))
+    path = tmp_path / 'two'
+    with bag_io.BagReader(clean.path) as reader, bag_io.BagWriter(path) as writer:
+        for topic, type_name in reader.topics.items():
+            writer.add_topic(topic, type_name)
+        for r in reader.records():
+            writer.write(r.topic, r.log_ns, r.data)
+        writer.write('/robot_description', r.log_ns + 1,
+                     bag_io.serialize(bag_io.typestore().types['std_msgs/msg/String'](data=other),
+                                      'std_msgs/msg/String'))
+    session, notes = rests.load_session(path)
+    assert session.description.to_dict() == clean.declared.to_dict()
+    assert any('2 /robot_description messages' in n for n in notes), notes
+
+
+def test_a_destination_that_cannot_be_written_is_refused_before_any_work(tmp_path, capsys):
+    folder = tmp_path / 'RESULT.yaml'
+    folder.mkdir()
+    missing_bag = str(tmp_path / 'no-bag')     # the destination is checked before the bag
+    for out, reason in ((folder, 'is a folder'), ('/proc/self/none/RESULT.yaml', 'cannot write')):
+        assert calibrate_cli.main([missing_bag, '--out', str(out)]) == 1
+        err = capsys.readouterr().err
+        assert reason in err and 'no such bag' not in err
+    assert os.listdir(folder) == [] and sorted(os.listdir(tmp_path)) == ['RESULT.yaml']
+
+
+def test_a_worse_calibration_is_refused_with_both_figures():
+    d = types.SimpleNamespace(errors_mm={'nominal': 0.706, 'final': 0.868})
+    with pytest.raises(pipeline.CalibrationError, match=r'0\.868 mm against 0\.706 mm.*--force'):
+        pipeline.refuse_if_worse(d, force=False)
+    pipeline.refuse_if_worse(d, force=True)
+
+
+def test_the_result_and_its_plot_appear_together_or_neither(tmp_path):
+    yaml_path, plot = tmp_path / 'R.yaml', tmp_path / 'R-residuals.png'
+    yaml_path.write_text('previous\n')
+
+    def fail(tmp):
+        raise OSError('disk full')
+    for writers in ({str(plot): lambda tmp: open(tmp, 'w').write('plot'), str(yaml_path): fail},
+                    {str(plot): fail, str(yaml_path): lambda tmp: open(tmp, 'w').write('new')}):
+        with pytest.raises(OSError, match='disk full'):
+            pipeline.write_together(writers)
+        assert sorted(os.listdir(tmp_path)) == ['R.yaml'] and yaml_path.read_text() == 'previous\n'
+    pipeline.write_together({str(plot): lambda tmp: open(tmp, 'w').write('plot'),
+                             str(yaml_path): lambda tmp: open(tmp, 'w').write('new')})
+    assert plot.read_text() == 'plot' and yaml_path.read_text() == 'new'
+
+
+def test_a_signal_never_replaces_the_previous_result(clean, tmp_path):
+    """SIGTERM during the work: exit 130, the previous RESULT.yaml intact, no temporary file."""
+    out = tmp_path / 'RESULT.yaml'
+    out.write_text('previous result\n')
+    child = subprocess.Popen([sys.executable, '-m', 'robotenis_calibration.calibrate_cli',
+                              clean.path, '--out', str(out)], stderr=subprocess.PIPE, text=True)
+    for line in child.stderr:          # wait until the work has begun
+        if 'rests averaged' in line:
+            break
+    child.send_signal(signal.SIGTERM)
+    err = child.stderr.read()
+    assert child.wait(timeout=60) == 130, err
+    assert 'interrupted by SIGTERM' in err
+    assert out.read_text() == 'previous result\n'
+    assert sorted(os.listdir(tmp_path)) == ['RESULT.yaml']

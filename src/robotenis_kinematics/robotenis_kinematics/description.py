@@ -151,6 +151,8 @@ def from_dict(data):
         raise DescriptionError("effects: expected a list of maps, each with a 'name'")
     for i, e in enumerate(effects):
         effect_models.validate(e, f'effects[{i}]')   # each effect model checks its own keys
+        if any(other['name'] == e['name'] for other in effects[:i]):
+            raise DescriptionError(f"effects[{i}].name: {e['name']} is listed twice")
     report = data.get('report') or {}
     if not isinstance(report, dict):
         raise DescriptionError('report: expected a map')

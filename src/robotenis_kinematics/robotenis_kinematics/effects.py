@@ -16,22 +16,29 @@ and the two generic effects, for what no named effect explains, each a family of
 parameter per joint or per optical axis::
 
     - {name: joint_harmonics, terms: {cos5: [...], sin5: [...]}, terms_std: {...}}
-    - {name: camera_field, reference_range: 0.35, terms: {w: [...], uu: [...]}, terms_std: {...}}
+    - {name: camera_field, reference_range: 0.35, terms: {w: [...], xx: [...]}, terms_std: {...}}
 
 The joint effects turn resolver increments Theta into arm angles (model of the residual loop):
 
     theta = theta0 + (1 + k) Theta - (w / 2) dir + c tau_g(P, theta0 + Theta)
 
-                                                + sum_n (c_n cos(n t) + s_n sin(n t))
+                                        + sum_n (c_n cos(n Theta) + s_n sin(n Theta))
 
 with dir the sign of the joint's last motion (the arm lags the motor by half the backlash width),
-tau_g the gravity torque on the arm (positive down) of a robot with the declared gravity load and
-t = theta0 + Theta: the joint harmonics are errors that repeat with the joint's angle (an
-eccentric gear or resolver). The camera-side effects correct the measured sphere centre s
+tau_g the gravity torque on the arm (positive down) of a robot with the declared gravity load;
+the joint harmonics are errors that repeat with the joint's angle (an eccentric gear or
+resolver), in the reading itself so that they stay linear in their coefficients and apart from
+theta0 (their phase is in c_n, s_n). The camera-side effects correct the measured sphere centre s
 (optical frame) before it becomes an increment, Pi = -R s (R the declared camera rotation): the
 camera field is a polynomial error of the measurement, s_measured = s + sum_m f_m phi_m(s), with
-monomials phi_m in u = x / z, v = y / z and w = z / z_ref - 1 (z_ref = ``reference_range``), so
-Pi_true = -R (s - sum_m f_m phi_m(s)); the hand-eye rotation r then turns the increments:
+monomials phi_m in x = s_x / z_ref, y = s_y / z_ref and w = s_z / z_ref - 1 (z_ref =
+``reference_range``), so Pi_true = -R (s - sum_m f_m phi_m(s)). In these coordinates every
+linear error of the measurement (a scale along an axis, a small rotation, a shear) is exactly of
+degree 1. A scale of every measurement, s -> (1 + e) s, is the one field the robot's geometry
+cannot tell from its own scale (a robot e larger seen by a camera e shorter): it is the direction
+x, y, w -> e z_ref along x, y, z, so the field never moves along it: its w term's z coefficient
+is held at zero (``UNSEEN``). A depth-scale error then shows as the lateral scale it is relative
+to that unseen isotropic one. The hand-eye rotation r then turns the increments:
 Pi_true = exp([r]x) Pi. base_geometry is applied in the legs' phi and H themselves; its entry
 records what was identified.
 """
@@ -59,10 +66,11 @@ BASE_GEOMETRY_KEYS = ('phi', 'H')
 GENERIC = ('joint_harmonics', 'camera_field')
 MODELS = tuple(PARAMETERS) + ('base_geometry',) + GENERIC
 JOINT_NAMED = ('joint_scale', 'backlash', 'gravity_compliance')
-# Generic terms in a model: 'joint_cos5' is joint_harmonics' cos5, 'camera_uw' camera_field's uw
+# Generic terms in a model: 'joint_cos5' is joint_harmonics' cos5, 'camera_xw' camera_field's xw
 JOINT_TERM = re.compile(r'^joint_(cos|sin)([1-9][0-9]*)$')
-CAMERA_TERM = re.compile(r'^camera_([uvw]+)$')
+CAMERA_TERM = re.compile(r'^camera_([xyw]+)$')
 TERM_UNIT = 1e-4          # rad or m: the observability scale of a generic term
+UNSEEN = ('camera_w3',)   # parameters held at zero: the field's part the geometry absorbs
 CAMERA_REFERENCE_RANGE = 0.35    # m: the camera field's z_ref, mid-range of the planned poses
 
 
@@ -87,10 +95,10 @@ def joint_term_names(orders):
 
 
 def camera_term_names(degree):
-    """Return the camera-field monomials up to ``degree`` in u, v, w (no constant term)."""
+    """Return the camera-field monomials up to ``degree`` in x, y, w (no constant term)."""
     names = []
     for d in range(1, degree + 1):
-        names += [''.join(m) for m in _monomials('uvw', d)]
+        names += [''.join(m) for m in _monomials('xyw', d)]
     return tuple(f'camera_{m}' for m in names)
 
 
@@ -104,7 +112,8 @@ def _monomials(letters, degree):
 def camera_basis(name, sphere):
     """Return the monomial phi_m of a camera-field term at sphere centres (K, 3): (K,)."""
     x, y, z = np.asarray(sphere, dtype=float).T
-    values = {'u': x / z, 'v': y / z, 'w': z / CAMERA_REFERENCE_RANGE - 1}
+    values = {'x': x / CAMERA_REFERENCE_RANGE, 'y': y / CAMERA_REFERENCE_RANGE,
+              'w': z / CAMERA_REFERENCE_RANGE - 1}
     out = np.ones(len(z))
     for letter in CAMERA_TERM.match(name).group(1):
         out = out * values[letter]
@@ -136,8 +145,11 @@ def validate(effect, where):
     if name == 'gravity_compliance':
         load = effect.get('gravity_load', NOMINAL_GRAVITY_LOAD)
         for part in ('arm', 'platform'):
-            if not isinstance(load, dict) or not isinstance(load.get(part), (int, float)):
-                raise DescriptionError(f'{where}.gravity_load.{part}: expected a number (kg)')
+            value = load.get(part) if isinstance(load, dict) else None
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not np.isfinite(value) or value < 0:
+                raise DescriptionError(f'{where}.gravity_load.{part}: expected a finite mass '
+                                       f'(kg), got {value!r}')
 
 
 def _validate_generic(effect, where):
@@ -222,7 +234,7 @@ def model_joint_angles(desc, fx, Theta, direction, P, load=None):
         term = JOINT_TERM.match(name)
         if term:
             wave = np.cos if term.group(1) == 'cos' else np.sin
-            derivative[name] = wave(int(term.group(2)) * base)
+            derivative[name] = wave(int(term.group(2)) * Theta)
     if 'joint_scale' in fx:
         derivative['joint_scale'] = Theta
     if 'backlash' in fx:
@@ -242,7 +254,7 @@ def increments_for(desc, theta, direction, P):
 
     ``direction`` is the sign of each joint's motion into this pose and P the effector position
     (for compliance). With h the joint harmonics,
-    Theta = (theta - theta0 + w/2 dir - c tau_g(P, theta0 + Theta) - h(theta0 + Theta)) / (1 + k),
+    Theta = (theta - theta0 + w/2 dir - c tau_g(P, theta0 + Theta) - h(Theta)) / (1 + k),
     solved by fixed point: the sag and the harmonics change by 1e-3 of a step or less, so three
     passes are exact.
     """
@@ -270,16 +282,17 @@ def rotation_vector_matrix(r):
     return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
 
 
-def camera_increments(fx, Pi, R):
+def camera_increments(fx, Pi, R, at=None):
     """
     Return the increments the camera-side effects of ``fx`` give for the measured ones (K, 3).
 
     The camera field's error is removed from the sphere centre s = -R^T Pi, then the hand-eye
     rotation turns the result (see the module docstring); R is the declared camera rotation.
+    The field is evaluated at the increments ``at`` (default Pi).
     """
     terms = [name for name in fx if CAMERA_TERM.match(name)]
     if terms:
-        sphere = -np.asarray(Pi, dtype=float) @ np.asarray(R)
+        sphere = -np.asarray(Pi if at is None else at, dtype=float) @ np.asarray(R)
         error = sum(np.outer(camera_basis(name, sphere), fx[name]) for name in terms)
         Pi = Pi + error @ np.asarray(R).T
     if 'hand_eye_rotation' not in fx:

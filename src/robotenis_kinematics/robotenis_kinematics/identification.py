@@ -25,8 +25,16 @@ a fraction of the cost, and its chi-square sum_k Gamma_k^T (G Sigma G^T)^-1 Gamm
 chi2(3K - p) when the model is right -- the statistic the residual loop tests. The covariance of U
 is (J_w^T J_w)^-1 with J_w the whitened observation matrix; evaluated at the true parameters it is
 the Cramer-Rao bound.
+
+One second-order term is not negligible everywhere: J_w evaluated at the measurements shares
+their noise with the residuals, which biases the normal equations J_w^T r_w = 0 by O(K sigma^2).
+For the paper's parameters that is nothing; for a smooth field of many terms (the residual loop's
+camera field) it is most of what the field's columns add to the model's, and least squares would
+fit a field to pure noise. ``identify`` therefore minimises the Gauss-Helmert objective itself:
+residuals and Jacobian at the observations adjusted to the model (``adjusted``), whose error is
+uncorrelated with the residuals.
 """
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -50,6 +58,8 @@ class Measurements:
     cov_Pi : (3, 3) or (K, 3, 3) covariance of each Pi_k, m^2.
     direction : (K, 3) sign of each joint's last motion before pose k (for backlash); by default
         from the order of Theta (``effects.motion_direction``).
+    Pi_basis : (K, 3) where the camera-field terms are evaluated; by default Pi itself
+        (``adjusted`` gives the increments that keep the terms uncorrelated with the residuals).
     """
 
     Theta: np.ndarray
@@ -57,6 +67,7 @@ class Measurements:
     sigma_Theta: np.ndarray
     cov_Pi: np.ndarray
     direction: np.ndarray = None
+    Pi_basis: np.ndarray = None
 
     def __post_init__(self):
         self.Theta = np.asarray(self.Theta, dtype=float)
@@ -71,6 +82,7 @@ class Measurements:
         self.cov_Pi = np.broadcast_to(np.asarray(self.cov_Pi, dtype=float), (K, 3, 3))
         if self.direction is None:
             self.direction = effects.motion_direction(self.Theta)
+        self.Pi_basis = self.Pi if self.Pi_basis is None else np.asarray(self.Pi_basis, float)
 
     def __len__(self):
         return len(self.Theta)
@@ -78,7 +90,7 @@ class Measurements:
     def subset(self, index):
         """Return the measurements of the poses selected by ``index``."""
         return Measurements(self.Theta[index], self.Pi[index], self.sigma_Theta[index],
-                            self.cov_Pi[index], self.direction[index])
+                            self.cov_Pi[index], self.direction[index], self.Pi_basis[index])
 
 
 @dataclass
@@ -134,7 +146,7 @@ def _leg_geometry(model, meas):
     joint-effect derivatives dtheta_ik/d(effect parameter i) and e_i, de_i/dphi_i (3, 3).
     """
     desc = model.desc
-    Pi = effects.camera_increments(model.effects, meas.Pi, desc.camera_rotation)
+    Pi = effects.camera_increments(model.effects, meas.Pi, desc.camera_rotation, meas.Pi_basis)
     P = model.P0 + Pi
     theta, dtheta = effects.model_joint_angles(desc, model.effects, meas.Theta, meas.direction, P)
     d = delta.effector_joints(desc, P) - delta.elbow_points(desc, theta)
@@ -181,7 +193,7 @@ def partials(model, meas):
     }
     out.update({name: dtheta * dt for name, dt in dtheta_fx.items()})
     R = desc.camera_rotation
-    sphere = -meas.Pi @ R
+    sphere = -meas.Pi_basis @ R
     for name in model.effects:
         if effects.is_camera_term(name):
             phi = effects.camera_basis(name, sphere)
@@ -215,8 +227,39 @@ def residual_covariance(meas, parts):
 
 def whitening(meas, parts):
     """Lower-triangular L_k^-1 (K, 3, 3) with L_k L_k^T the covariance of Gamma_k."""
-    L = np.linalg.cholesky(residual_covariance(meas, parts))
-    return np.linalg.inv(L)
+    return _lower_inverse(np.linalg.cholesky(residual_covariance(meas, parts)))
+
+
+def _lower_inverse(L):
+    """Inverse of lower-triangular 3x3 matrices (K, 3, 3) by forward substitution, vectorised."""
+    M = np.zeros_like(L)
+    for i in range(3):
+        M[:, i, i] = 1.0 / L[:, i, i]
+    M[:, 1, 0] = -L[:, 1, 0] * M[:, 0, 0] * M[:, 1, 1]
+    M[:, 2, 1] = -L[:, 2, 1] * M[:, 1, 1] * M[:, 2, 2]
+    M[:, 2, 0] = -(L[:, 2, 0] * M[:, 0, 0] + L[:, 2, 1] * M[:, 1, 0]) * M[:, 2, 2]
+    return M
+
+
+def adjusted(model, meas):
+    """
+    Return the observations adjusted to ``model``: each pose then meets Gamma = 0 (first order).
+
+    The least-squares adjustment of each pose's observations V = [Theta, Pi] to its constraints
+    (Gauss-Helmert, to first order): V_hat = V - Sigma_V G^T S^-1 Gamma, with G = dGamma/dV and
+    S = G Sigma_V G^T the covariance of Gamma. The adjusted observations' error is uncorrelated
+    with the residual Gamma, whereas the measured ones' is not: a Jacobian evaluated at the
+    measurements shares the residual's noise, and in a direction nearly spanned by the model's own
+    columns (a smooth field, once they are projected out) that shared noise is most of what is
+    left, so a test or a fit would find a field in pure noise (``whitened_problem(...,
+    adjust=True)`` evaluates everything at V_hat).
+    """
+    parts = partials(model, meas)
+    gain = np.linalg.solve(residual_covariance(meas, parts),
+                           constraints(model, meas)[..., None])[..., 0]
+    Theta = meas.Theta - meas.sigma_Theta ** 2 * parts['theta'] * gain
+    Pi = meas.Pi - np.einsum('kab,kib,ki->ka', meas.cov_Pi, parts['P'], gain)
+    return replace(meas, Theta=Theta, Pi=Pi, Pi_basis=Pi)
 
 
 def _stack_legs(x):
@@ -224,12 +267,23 @@ def _stack_legs(x):
     return np.swapaxes(x, 0, 1).reshape(-1, *x.shape[2:])
 
 
-def whitened_problem(model, meas, names):
-    """Whitened residuals r_w (3K,) and Jacobian J_w (3K, p), stacked pose by pose."""
-    parts = partials(model, meas)
-    W = whitening(meas, parts)
-    Gamma = constraints(model, meas)
-    J = observation_matrix(model, meas, names, parts)
+def whitened_problem(model, meas, names, adjust=False):
+    """
+    Whitened residuals r_w (3K,) and Jacobian J_w (3K, p), stacked pose by pose.
+
+    With ``adjust``, those of the Gauss-Helmert objective: everything is evaluated at the
+    observations adjusted to the model, V_hat (``adjusted``), and the residual is
+    Gamma(V_hat) + G(V_hat) (V - V_hat), equal to Gamma(V) to first order; its Jacobian (by the
+    envelope theorem, dGamma/dU at V_hat) shares no noise with it.
+    """
+    at = adjusted(model, meas) if adjust else meas
+    parts = partials(model, at)
+    W = whitening(at, parts)
+    Gamma = constraints(model, at)
+    if adjust:
+        Gamma = Gamma + parts['theta'] * (meas.Theta - at.Theta) \
+            + np.einsum('kij,kj->ki', parts['P'], meas.Pi - at.Pi)
+    J = observation_matrix(model, at, names, parts)
     K = len(meas)
     J_pose = J.reshape(3, K, -1).transpose(1, 0, 2)
     r_w = np.einsum('kij,kj->ki', W, Gamma).reshape(-1)
@@ -297,9 +351,10 @@ def identify(start, meas, names=PAPER_PARAMETERS, max_iterations=100, tol=1e-12,
     Identify by damped Gauss-Newton (Levenberg-Marquardt) on the whitened constraints.
 
     The default solver. Minimises chi2(U) = sum_k Gamma_k^T (G_k Sigma_k G_k^T)^-1 Gamma_k
-    (effective variance; see the module docstring). The weights are re-evaluated at every accepted
-    step. Stops when the step is below ``tol`` relative to the parameter scale or chi2 stops
-    decreasing.
+    (effective variance; see the module docstring), in its Gauss-Helmert form: at the observations
+    adjusted to the current U (``whitened_problem(..., adjust=True)``). The weights are
+    re-evaluated at every accepted step. Stops when the step is below ``tol`` relative to the
+    parameter scale or chi2 stops decreasing.
 
     Returns
     -------
@@ -309,7 +364,7 @@ def identify(start, meas, names=PAPER_PARAMETERS, max_iterations=100, tol=1e-12,
     """
     names = tuple(names)
     model, U = start, start.get(names)
-    r, J = whitened_problem(model, meas, names)
+    r, J = whitened_problem(model, meas, names, adjust=True)
     cost = r @ r
     lam = 1e-3
     history = [float(cost)]
@@ -321,25 +376,27 @@ def identify(start, meas, names=PAPER_PARAMETERS, max_iterations=100, tol=1e-12,
         g = Jtr / scale
         while True:
             step = -np.linalg.solve(A + lam * np.eye(len(U)), g) / scale
+            if np.all(np.abs(step) <= tol * (1 + np.abs(U))):
+                break  # below tol: its cost change is rounding, not worth an evaluation
             trial = model.with_values(names, U + step)
-            r_t, J_t = whitened_problem(trial, meas, names)
+            r_t, J_t = whitened_problem(trial, meas, names, adjust=True)
             cost_t = r_t @ r_t
             if cost_t <= cost:
                 break
             lam *= 10
             if lam > 1e12:
                 break
-        if cost_t > cost:
+        small = np.all(np.abs(step) <= tol * (1 + np.abs(U)))
+        if small or cost_t > cost:
             converged = True  # no downhill step left: at the minimum to machine precision
             break
-        small = np.all(np.abs(step) <= tol * (1 + np.abs(U)))
         flat = cost - cost_t <= 1e-15 * max(cost, 1e-300)
         U, model, r, J, cost = U + step, trial, r_t, J_t, cost_t
         lam = max(lam / 10, 1e-12)
         history.append(float(cost))
         if callback is not None:
             callback(n, cost)
-        if small or flat:
+        if flat:
             converged = True
             break
     cov = np.linalg.inv(J.T @ J)

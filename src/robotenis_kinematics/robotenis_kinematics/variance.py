@@ -49,7 +49,7 @@ class Floor:
         camera, resolver = self._camera_variances(meas, R), self.variances.get('resolver', 0.0)
         cov = meas.cov_Pi + np.einsum('ab,kb,cb->kac', R, camera, R)
         sigma = np.sqrt(meas.sigma_Theta ** 2 + resolver)
-        return idf.Measurements(meas.Theta, meas.Pi, sigma, cov, meas.direction)
+        return replace(meas, sigma_Theta=sigma, cov_Pi=cov)
 
     def _camera_variances(self, meas, R):
         grow = (ranges(meas, R) / effects.CAMERA_REFERENCE_RANGE) ** 2

@@ -31,7 +31,7 @@ def test_without_effects_the_increments_are_the_angles_from_home():
 HARMONICS = {'name': 'joint_harmonics', 'terms': {'cos5': [2e-4, -1e-4, 3e-4],
                                                   'sin5': [-3e-4, 2e-4, 1e-4]}}
 FIELD = {'name': 'camera_field', 'reference_range': effects.CAMERA_REFERENCE_RANGE,
-         'terms': {'w': [0.0, 0.0, 1.4e-3], 'uu': [1e-4, 0.0, -2e-4]}}
+         'terms': {'w': [0.0, 0.0, 1.4e-3], 'xx': [1e-4, 0.0, -2e-4]}}
 
 
 def test_increments_for_inverts_the_joint_harmonics_too():
@@ -51,7 +51,7 @@ def test_increments_for_inverts_the_joint_harmonics_too():
 def test_generic_effects_are_read_written_and_checked():
     desc = description.nominal().copy(effects=[dict(HARMONICS), dict(FIELD)])
     again = description.loads(description.dumps(desc))
-    assert set(effects.parameters(again)) == {'joint_cos5', 'joint_sin5', 'camera_w', 'camera_uu'}
+    assert set(effects.parameters(again)) == {'joint_cos5', 'joint_sin5', 'camera_w', 'camera_xx'}
     for bad, key in ((dict(HARMONICS, terms={'tan5': [0.0, 0.0, 0.0]}), 'terms.tan5'),
                      (dict(FIELD, terms={'w': [0.0, 0.0]}), 'terms.w'),
                      (dict(FIELD, reference_range=0.5), 'reference_range')):

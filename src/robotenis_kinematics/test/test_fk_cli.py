@@ -1,4 +1,5 @@
 import io
+import re
 
 import numpy as np
 import pytest
@@ -40,3 +41,27 @@ def test_bad_model_is_named(monkeypatch, capsys, tmp_path):
     bad.write_text('legs: []\n')
     code, _, err = run(monkeypatch, capsys, ['--model', str(bad)], '0,0,0\n')
     assert code == 2 and 'bad.yaml: legs' in err
+
+
+def test_a_row_without_forward_kinematics_is_named_and_the_others_printed(monkeypatch, capsys):
+    model = description.config_path('nominal.yaml')
+    stdin = '0,0,0\n\n0.8,-1.4,-2.8\n0.1,0.1,0.1\n'    # the third: the forearms cannot close
+    code, out, err = run(monkeypatch, capsys, ['--model', model], stdin)
+    rows = out.splitlines()
+    assert code == 1 and 'line(s) 3' in err and len(rows) == 3 and rows[1] == 'nan,nan,nan'
+    nominal = description.nominal()
+    np.testing.assert_allclose([float(v) for v in rows[2].split(',')],
+                               delta.forward(nominal, np.full(3, 0.1)), atol=1e-9)
+
+
+@pytest.mark.parametrize('effects, key', [
+    ([{'name': 'gravity_compliance', 'compliance': [1e-4, 1e-4, 1e-4],
+       'gravity_load': {'arm': float('nan'), 'platform': 3.0}}], 'gravity_load.arm'),
+    ([{'name': 'backlash', 'width': [1e-3, 1e-3, 1e-3]},
+      {'name': 'backlash', 'width': [2e-3, 2e-3, 2e-3]}], 'effects.1..name: backlash is listed'),
+])
+def test_a_model_with_a_bad_effect_is_refused(monkeypatch, capsys, tmp_path, effects, key):
+    path = tmp_path / 'model.yaml'
+    description.save(description.nominal().copy(effects=effects), path)
+    code, out, err = run(monkeypatch, capsys, ['--model', str(path)], '0,0,0\n')
+    assert code == 2 and out == '' and re.search(key, err), err

@@ -19,3 +19,13 @@ EFFECTS = {
     'hand_eye_rotation': {'hand_eye_rotation': [0.004, -0.003, 0.005]},
     'base_geometry': {'base_geometry': {'dH': [0.002, 0.0, 0.0], 'dphi': [0.0, 0.008, -0.006]}},
 }
+
+# Effects outside the residual loop's library, of two kinds (a joint error periodic in the
+# angle, a camera error of its range), with the generic model that should stand for each. A third
+# kind is kept out of here, for the benchmark only.
+OUTSIDE_LIBRARY = {
+    'joint_eccentricity': ({'joint_eccentricity': {'order': 5, 'amplitude': [3.5e-4] * 3,
+                                                   'phase': [0.0, 1.0, 2.0]}},
+                           'joint_harmonics'),
+    'camera_depth_scale': ({'camera_depth_scale': 0.004}, 'camera_field'),
+}

@@ -92,6 +92,7 @@ class BagSpec:
     omit: tuple = ()                    # topics not written
     images_per_pose: int = 0
     compressed_images: bool = True
+    storage: str = 'mcap'               # or 'sqlite3', rosbag2's other storage
 
 
 @dataclass
@@ -352,7 +353,7 @@ def write(path, spec=BagSpec(), progress=None):
                    or (spec.images_per_pose and t == image_topic(spec)))]
     counts = dict.fromkeys(topics, 0)
     store = typestore()
-    bag = Writer(Path(path), version=9, storage_plugin=StoragePlugin.MCAP)
+    bag = Writer(Path(path), version=9, storage_plugin=StoragePlugin[spec.storage.upper()])
     bag.open()
     try:
         connections = {t: bag.add_connection(t, TOPICS[t], typestore=store) for t in topics}
