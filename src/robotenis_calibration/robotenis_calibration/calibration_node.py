@@ -10,11 +10,16 @@ declared description, joint states, sphere positions and detections, camera info
 markers, progress, and of the camera images only the first ``images_per_pose`` frames of each rest,
 as lossless PNG (sensor_msgs/CompressedImage on ``image_topic``/compressed): enough to check or
 re-run the detector on every pose, at a small share of the bag (all frames raw would be 300 kB
-each at 120 Hz). The bag names the topics as the calibration contract does (/joint_states,
+each at 120 Hz). The subscribed topics are recorded as the bytes that arrived (as ``ros2 bag
+record`` does; rclpy's own serialization of a JointState has trailing bytes that rosbags' reader
+refuses). The bag names the topics as the calibration contract does (/joint_states,
 /sphere/position, /robot_description, ...) whatever the node's namespace. When the session is
 over the bag is calibrated exactly as `./robotenis calibrate BAG --out RESULT.yaml` would do it
-(robotenis_calibration.pipeline). A second request while a session runs is refused with "busy";
-progress goes to calibration/progress. On shutdown a bag being recorded is closed, so it stays
+(robotenis_calibration.pipeline). A request that cannot give the rests the identification needs
+is refused before anything moves, and a session whose joint states or detections stop for longer
+than a pose can last is stopped, naming the silent input, with its bag kept and no result
+(robotenis_calibration.session_limits). A second request while a session runs is refused with
+"busy"; progress goes to calibration/progress. On shutdown a bag being recorded is closed, so it stays
 whole. Parameters: the table PARAMETERS.
 """
 import array
@@ -27,9 +32,9 @@ import numpy as np
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
-from rclpy.serialization import serialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from rclpy.task import Future
-from robotenis_calibration import bag_io, pipeline, poses
+from robotenis_calibration import bag_io, pipeline, poses, session_limits
 from robotenis_calibration.session_runner import DONE, MEASURING, RunnerConfig, SessionRunner
 from robotenis_interfaces.msg import CalibrationProgress, RestMarker, SphereDetection
 from robotenis_interfaces.srv import Calibrate
@@ -91,7 +96,8 @@ class CalibrationNode(Node):
         self.description_pub = self.create_publisher(String, 'robot_description', LATCHED)
         for topic, (cls, _) in RECORDED.items():
             qos = qos_profile_sensor_data if topic.startswith('camera') else 50
-            self.create_subscription(cls, topic, lambda msg, t=topic: self.on_message(t, msg), qos)
+            self.create_subscription(cls, topic, lambda data, t=topic: self.on_message(t, data),
+                                     qos, raw=True)
         self.create_subscription(Image, self.image_topic, self.on_image, qos_profile_sensor_data)
         # The service awaits the whole session: in its own reentrant group, so that the timer and
         # the subscriptions (default group) run meanwhile and a second request can be answered
@@ -104,20 +110,23 @@ class CalibrationNode(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def record(self, topic, msg):
+        """Write a message (or its serialized bytes) to the bag being recorded, if any."""
         if self.writer is not None:
-            self.writer.write(bag_topic(topic), self.get_clock().now().nanoseconds,
-                              serialize_message(msg))
+            data = msg if isinstance(msg, bytes) else serialize_message(msg)
+            self.writer.write(bag_topic(topic), self.get_clock().now().nanoseconds, data)
 
-    def on_message(self, topic, msg):
-        self.record(topic, msg)
+    def on_message(self, topic, data):
+        """Record a subscribed topic's serialized message; feed the runner what it measures."""
+        self.record(topic, data)
         if self.runner is None:
             return
         t = self.now()
         if topic == 'joint_states':
-            Theta = joint_vector(msg, 'position')
+            Theta = joint_vector(deserialize_message(data, JointState), 'position')
             if Theta is not None:
                 self.runner.joint_state(t, Theta)
         elif topic == 'sphere/detection':
+            msg = deserialize_message(data, SphereDetection)
             self.runner.detection(t, xyz(msg.position), np.reshape(msg.covariance, (3, 3)))
 
     def on_image(self, msg):
@@ -220,6 +229,9 @@ class CalibrationNode(Node):
             frames_per_pose=self.param('frames_per_pose', request.frames_per_pose),
             settle_time=request.settle_time if request.settle_time > 0
             else self.get_parameter('settle_time').value)
+        refused = session_limits.refusal(n, config.frames_per_pose)
+        if refused is not None:
+            raise ValueError(f'request refused, nothing was moved: {refused}')
         rng = np.random.default_rng(request.seed)
         planned = poses.select(request.pose_selection or 'boundary', declared, guess, n, rng)
         stamp = time.strftime('%Y%m%d-%H%M%S')
@@ -256,6 +268,13 @@ class CalibrationNode(Node):
         skipped = list(self.runner.skipped)
         self.close_bag()
         response.bag_path = bag
+        if self.runner.failure is not None:
+            response.success = False
+            response.message = (f'session stopped at pose {self.runner.index + 1} of '
+                                f'{len(self.runner.poses)}: {self.runner.failure}; no result '
+                                f'written, the bag is kept: {bag}')
+            self.get_logger().error(response.message)
+            return
         settings = pipeline.Settings(self.get_parameter('holdout_fraction').value, request.seed)
         outcome = pipeline.calibrate_bag(
             bag, result_path, settings,

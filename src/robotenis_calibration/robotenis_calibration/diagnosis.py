@@ -12,7 +12,7 @@ The residual loop: find what the model lacks, add it, and prove it helped on hel
    observations adjusted to the current fit (``identification.adjusted``), whose error is
    uncorrelated with the residuals: at the measurements it shares their noise, and a smooth
    field's columns, once the model's are projected out, would be mostly that noise. A generic
-   candidate's size (the harmonics' orders, the field's degree) is chosen first by K-fold
+   candidate's size (the harmonics' orders, the field's coefficients) is chosen first by K-fold
    cross-validation on the training poses only, never on the held-out ones.
 3. Take the most significant named candidate if one is significant (Bonferroni over the
    candidates left), else the most significant generic one, keeping only its parameters that are
@@ -48,16 +48,24 @@ GENERIC = ('joint_harmonics', 'camera_field')
 CANDIDATES = NAMED + GENERIC
 ORDERS = tuple(range(1, 9))     # harmonics of a joint's angle a short series may pick
 MAX_ORDERS = 4                  # the series' length at most
-DEGREES = (1, 2, 3)             # of the camera field
+DEGREE = 3                      # of the camera field's monomials a field may pick from
+MAX_FIELD_TERMS = 6             # the field's coefficients at most
 FOLDS = 5
 FEATURES = ('joint angle', 'joint angle squared', 'motion direction', 'gravity torque', 'range',
             'image x', 'image y', 'time')
 
 
 def generic_terms(name, size):
-    """Return the effect terms of a generic candidate: its orders (a tuple), or its degree."""
+    """
+    Return the effect terms of a generic candidate.
+
+    ``size``: the harmonics' orders (a tuple); the camera field's degree, or the parameters
+    chosen (a tuple of names such as 'camera_w3').
+    """
     if name == 'joint_harmonics':
         return effects.joint_term_names(size)
+    if isinstance(size, tuple):
+        return tuple(dict.fromkeys(p[:-1] for p in size))
     return effects.camera_term_names(size)
 
 
@@ -65,6 +73,8 @@ def candidate_parameters(name, size=None):
     """Return the parameter names a candidate proposes (before the identifiability check)."""
     if name == 'base_geometry':
         return ('H1', 'H2', 'H3', 'phi1', 'phi2', 'phi3')
+    if name == 'camera_field' and isinstance(size, tuple):
+        return size
     if name in GENERIC:
         return tuple(p for term in generic_terms(name, size) for p in idf.effect_names(term)
                      if p not in effects.UNSEEN)
@@ -83,7 +93,7 @@ class CandidateTest:
     p_value: float
     # Wilson-Hilferty normal score of the statistic: ranks candidates where p underflows.
     z: float
-    size: object = None      # a generic candidate's orders or degree, chosen by cross-validation
+    size: object = None      # a generic candidate's orders or parameters, by cross-validation
 
 
 @dataclass
@@ -116,7 +126,7 @@ class Diagnosis:
     holdout_chi2: dict
     floor: variance.Floor = None    # the rests' error floor learned with the final model
     fallback: list = field(default_factory=list)
-    sizes: dict = field(default_factory=dict)     # generic effect -> orders or degree kept
+    sizes: dict = field(default_factory=dict)     # generic effect -> orders or parameters kept
     correlates: dict = field(default_factory=dict)  # generic effect -> generic_correlations
 
 
@@ -190,35 +200,60 @@ def cross_validated_size(result, meas, name, rng, folds=FOLDS):
 
     Linearised at the current fit: a size's whitened residuals are fitted on the current
     parameters and the candidate's terms with one fold of the rests left out, and the left-out
-    fold predicted. The joint harmonics pick their orders one at a time (forward selection, at
-    most MAX_ORDERS), the camera field its degree; None (no term) wins unless a size predicts
-    better.
+    fold predicted. Both generic candidates grow by forward selection, one item at a time: the
+    joint harmonics an order (its cos and sin on every joint, at most
+    MAX_ORDERS), the camera field one coefficient of a monomial up to DEGREE along one optical
+    axis (at most MAX_FIELD_TERMS), while the gain beats what chance gives the best of the items
+    left (``_forward_selection``). A sparse field matters: a full linear field is nearly a change
+    of the robot's own geometry, so every coefficient it needs not costs kinematic accuracy that
+    the camera cannot see. None (no term) wins unless a size predicts better.
     """
-    largest = ORDERS if name == 'joint_harmonics' else DEGREES[-1]
+    largest = ORDERS if name == 'joint_harmonics' else DEGREE
     proposed, r_w, J_w = candidate_problem(result, meas, name, largest)
     p = len(result.names)
     names = result.names + tuple(proposed[j] for j in identifiable(J_w, p)[0])
     J_w = J_w[:, [(result.names + proposed).index(n) for n in names]]
     cv = _FoldedProblem(r_w, J_w, np.repeat(rng.permutation(len(meas)) % folds, 3), folds)
+    if name == 'joint_harmonics':
+        pool, most = ORDERS, MAX_ORDERS
+    else:
+        pool, most = names[p:], MAX_FIELD_TERMS
 
-    def error(size):
-        extra = () if size is None else candidate_parameters(name, size)
-        return cv.error(list(range(p)) + [names.index(n) for n in extra if n in names])
-    best, best_error = None, error(None)
-    if name == 'camera_field':
-        for degree in DEGREES:
-            e = error(degree)
-            if e < best_error:
-                best, best_error = degree, e
-        return best
-    chosen = ()
-    while len(chosen) < MAX_ORDERS:
-        trials = {n: error(tuple(sorted(chosen + (n,)))) for n in ORDERS if n not in chosen}
-        n = min(trials, key=trials.get)
-        if trials[n] >= best_error:
-            break
-        chosen, best_error = tuple(sorted(chosen + (n,))), trials[n]
+    def columns(size):
+        extra = candidate_parameters(name, size) if size else ()
+        return list(range(p)) + [names.index(n) for n in extra if n in names]
+
+    chosen = _forward_selection(pool, most, lambda size: cv.error(columns(size)),
+                                lambda n: len(columns((n,))) - p)
     return chosen or None
+
+
+def _forward_selection(pool, most, error, width, alpha=ALPHA):
+    """
+    Grow a tuple of items of ``pool`` (kept in pool order) while ``error`` of it falls enough.
+
+    For an item of q parameters that explains nothing, the cross-validated error changes by
+    about 2 q - chi2(q) (the fit's gain on the folds it sees, paid twice on the one it predicts,
+    as in Akaike's criterion), so the best of n such items would lower it most times; an item is
+    taken only if it lowers the error by more than the largest of n null items would at level
+    alpha: chi2_(1 - alpha/n)(q) - 2 q.
+    """
+    chosen, best = (), error(())
+    while len(chosen) < most:
+        left = [n for n in pool if n not in chosen]
+        if not left:
+            break
+        trials = {n: error(_in_order(pool, chosen + (n,))) for n in left}
+        n = min(trials, key=trials.get)
+        q = max(width(n), 1)
+        if best - trials[n] <= stats.chi2.ppf(1 - alpha / len(left), q) - 2 * q:
+            break
+        chosen, best = _in_order(pool, chosen + (n,)), trials[n]
+    return chosen
+
+
+def _in_order(pool, items):
+    return tuple(n for n in pool if n in items)
 
 
 class _FoldedProblem:

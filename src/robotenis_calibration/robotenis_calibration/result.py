@@ -59,8 +59,9 @@ def _generic_entry(diagnosis, name):
                          + ', '.join(str(n) for n in size))
     else:
         entry['reference_range'] = fx.CAMERA_REFERENCE_RANGE
-        entry['kind'] = (f'an error of the camera measurement, a polynomial of degree {size} in '
-                         'x/z_ref, y/z_ref, z/z_ref - 1')
+        entry['kind'] = ('an error of the camera measurement along its optical axes, a '
+                         'polynomial in x/z_ref, y/z_ref, z/z_ref - 1 with the coefficients '
+                         + ', '.join(n[len(prefix):] for n in size))
     entry['correlates'] = [{'feature': f, 'component': c, 'r': round(r, 3)}
                            for f, c, r in diagnosis.correlates.get(name, [])]
     return entry
@@ -115,7 +116,7 @@ def summary(diagnosis):
     for name, correlates in diagnosis.correlates.items():
         size = diagnosis.sizes[name]
         size = f"orders {', '.join(map(str, size))}" if name == 'joint_harmonics' else \
-            f'degree {size}'
+            f"coefficients {', '.join(n[len('camera_'):] for n in size)}"
         found = ', '.join(f'{f} ({c}, r = {r:.2f})' for f, c, r in correlates)
         lines.append(f'  {name} (generic, {size}) correlates with: {found}')
     for step in diagnosis.steps:

@@ -1,5 +1,13 @@
-"""`./robotenis calibrate --call`: call the running calibration service, with a progress bar."""
+"""
+`./robotenis calibrate --call`: call the running calibration service, with a progress bar.
+
+While it waits for the answer the client watches the service in the ROS graph: a service gone for
+longer than GONE_GRACE (its node stopped, or died: a node killed outright leaves the graph when
+its DDS participant's lease runs out, about 20 s with Fast DDS's default) ends the wait with exit
+status 1 and what to do, instead of waiting out the time-out.
+"""
 import sys
+import time
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -8,6 +16,7 @@ from robotenis_interfaces.msg import CalibrationProgress
 from robotenis_interfaces.srv import Calibrate
 
 SERVICE_WAIT = 10.0   # s for the service to appear
+GONE_GRACE = 1.0      # s the service may be missing from the graph before the client gives up
 
 
 def progress_bar(fraction, text, width=40):
@@ -43,6 +52,24 @@ def answer(r):
     return 0
 
 
+def wait_for_answer(executor, client, future, timeout_s):
+    """Spin until the answer, the time-out or the service gone; 'answer', 'timeout' or 'gone'."""
+    deadline = time.monotonic() + timeout_s
+    missing_since = None
+    while not future.done():
+        now = time.monotonic()
+        if now > deadline:
+            return 'timeout'
+        if client.service_is_ready():
+            missing_since = None
+        elif missing_since is None:
+            missing_since = now
+        elif now - missing_since > GONE_GRACE:
+            return 'gone'
+        executor.spin_once(timeout_sec=0.1)
+    return 'answer'
+
+
 def call(args, timeout_s=3600.0):
     """Call /calibrate and wait for its answer, showing /calibration/progress; the exit status."""
     rclpy.init()
@@ -57,9 +84,14 @@ def call(args, timeout_s=3600.0):
                   './robotenis launch)', file=sys.stderr)
             return 2
         future = client.call_async(request_from(args))
-        executor.spin_until_future_complete(future, timeout_sec=timeout_s)
+        outcome = wait_for_answer(executor, client, future, timeout_s)
         print(file=sys.stderr)
-        if not future.done():
+        if outcome == 'gone':
+            print(f'robotenis calibrate: the {client.srv_name} service went away before answering '
+                  '(its node stopped or died; see its log): no result; what the session '
+                  "recorded is in the node's bags_dir", file=sys.stderr)
+            return 1
+        if outcome == 'timeout':
             print(f'robotenis calibrate: no answer from the service in {timeout_s:.0f} s',
                   file=sys.stderr)
             return 1

@@ -5,15 +5,22 @@ For each planned pose, in order: command it, wait until the joints are still, wa
 (vibrations of the robot and the ball's holder), then average resolver readings and sphere
 detections until enough frames are in; a pose whose ball is not seen within a time-out is skipped
 with the reason. After ``replan_after`` measured rests the poses still to come may be replaced
-(``replan``: the ball is then known from those rests, not from the user's rough guess). The
+(``replan``: the ball is then known from those rests, not from the user's rough guess). An input
+silent for longer than a pose can last (robotenis_calibration.session_limits) stops the session:
+``failure`` then says which, and the session is done without its remaining poses. The
 calibration node feeds it messages and executes the actions it returns.
 """
 from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
+from robotenis_calibration import session_limits
 
 MOVING, SETTLING, MEASURING, DONE = 'moving', 'settling', 'measuring', 'done'
+INPUTS = {  # the inputs watched for silence: name -> what feeds it
+    'joint_states': "the robot's driver (joint states)",
+    'sphere/detection': 'the sphere detector (or the ball is out of view at every pose)',
+}
 
 
 @dataclass
@@ -59,6 +66,8 @@ class SessionRunner:
         self.index = -1
         self.state = MOVING
         self.rests, self.skipped = [], []
+        self.failure = None               # why the session stopped early, if it did
+        self.last_input = {}              # input name -> time of its last message
         self.actions = []
         self._t_state = None
         self._window = deque()            # (t, Theta) of the last still_time while moving
@@ -66,8 +75,10 @@ class SessionRunner:
 
     @property
     def fraction(self):
-        """Share of the session done (0..1)."""
-        return max(self.index, 0) / len(self.poses) if self.state != DONE else 1.0
+        """Share of the session done (0..1); a session stopped early stays at its pose."""
+        if self.state == DONE and self.failure is None:
+            return 1.0
+        return min(max(self.index, 0), len(self.poses)) / len(self.poses)
 
     def _enter(self, state, t):
         self.state, self._t_state = state, t
@@ -84,11 +95,14 @@ class SessionRunner:
         self.actions.append(('progress', (MOVING, self.index, len(self.poses))))
 
     def start(self, t):
+        """Start the session at time t (s): command the first pose."""
+        self.last_input = dict.fromkeys(INPUTS, t)
         self._next_pose(t)
 
     def joint_state(self, t, Theta):
         """Take one /joint_states sample: the increments (rad) of the three joints."""
         Theta = np.asarray(Theta, dtype=float)
+        self.last_input['joint_states'] = t
         if self.state == MOVING:
             self._window.append((t, Theta))
             while self._window and self._window[0][0] < t - self.config.still_time:
@@ -104,13 +118,16 @@ class SessionRunner:
 
     def detection(self, t, position, covariance):
         """Take one sphere detection, in the optical frame (m), with its covariance (3x3, m^2)."""
+        self.last_input['sphere/detection'] = t
         if self.state == MEASURING and np.all(np.isfinite(position)):
             self._rest.sphere.append(np.asarray(position, dtype=float))
             self._rest.sphere_cov.append(np.asarray(covariance, dtype=float).reshape(3, 3))
 
     def tick(self, t):
-        """Advance on time alone: settle time over, time-outs, enough frames."""
+        """Advance on time alone: settle time over, time-outs, enough frames, silent inputs."""
         c = self.config
+        if self.state != DONE and self._stop_if_silent(t):
+            return
         if self.state == MOVING and t - self._t_state > c.move_timeout:
             self.skipped.append((self.index,
                                  f'did not come to rest within {c.move_timeout:.0f} s'))
@@ -135,6 +152,21 @@ class SessionRunner:
                                      ' (ball not in view?)'))
                 self.actions.append(('rest_end', self.index))
                 self._next_pose(t)
+
+    def _stop_if_silent(self, t):
+        """Stop the session, saying why, if an input is silent for longer than a pose can last."""
+        limit = session_limits.pose_time_limit(self.config)
+        silent = session_limits.silent_inputs(self.last_input, t, limit)
+        if not silent:
+            return False
+        self.failure = '; '.join(
+            f'no message on {name} for {t - self.last_input[name]:.1f} s, longer than a pose '
+            f'can last ({limit:.1f} s): {INPUTS[name]}' for name in silent)
+        if self.state == MEASURING:
+            self.actions.append(('rest_end', self.index))
+        self._enter(DONE, t)
+        self.actions.append(('done', None))
+        return True
 
     def _finish_rest(self, t):
         self._rest.end = t

@@ -94,17 +94,21 @@ def test_a_generic_effect_is_written_with_what_it_correlates_with(setting, tmp_p
     """A camera depth scale: the result's camera_field says so, and fk reads it back."""
     nominal, truth, P = setting
     effect, generic = OUTSIDE_LIBRARY['camera_depth_scale']
-    d = diagnose(session(sim_truth.with_effects(truth, **effect), nominal, P, 21, FLOOR), 21)
-    assert d.effects == [generic]
-    desc = result.calibrated_description(d, nominal)
-    description.save(desc, tmp_path / 'r.yaml')
-    (entry,) = description.load(tmp_path / 'r.yaml').effects
-    assert entry['name'] == 'camera_field' and entry['correlates']
-    # a depth read (1 + e) long is, beside the unseen isotropic scale, the lateral scale -e
-    fit = np.array([entry['terms']['x'][0], entry['terms']['y'][1]])
-    std = np.array([entry['terms_std']['x'][0], entry['terms_std']['y'][1]])
-    lateral = -effect['camera_depth_scale'] * effects.CAMERA_REFERENCE_RANGE
-    assert np.sum(((fit - lateral) / std) ** 2) < stats.chi2.ppf(0.999, 2)
+    # a depth read (1 + e) long: z_meas = z + e z_ref (1 + w), the constant in P0, the rest the
+    # w term's z coefficient and no other coefficient
+    depth = effect['camera_depth_scale'] * effects.CAMERA_REFERENCE_RANGE
+    z = []
+    for seed in (21, 22, 23, 24):
+        d = diagnose(session(sim_truth.with_effects(truth, **effect), nominal, P, seed, FLOOR),
+                     seed)
+        assert d.effects == [generic]
+        desc = result.calibrated_description(d, nominal)
+        description.save(desc, tmp_path / f'r{seed}.yaml')
+        (entry,) = description.load(tmp_path / f'r{seed}.yaml').effects
+        assert entry['name'] == 'camera_field' and entry['correlates']
+        assert [t for t, v in entry['terms'].items() if np.any(v)] == ['w']
+        z.append((entry['terms']['w'][2] - depth) / entry['terms_std']['w'][2])
+    assert np.sum(np.square(z)) < stats.chi2.ppf(0.999, len(z))
 
 
 def test_clean_residuals_pass_the_size_test(clean):

@@ -1,14 +1,19 @@
+import math
+
 import numpy as np
 
+from robotenis_calibration import session_limits
 from robotenis_calibration.session_runner import DONE, MEASURING, RunnerConfig, SessionRunner
 
 
-def drive(runner, visible, dt=0.001, t_end=30.0, seed=0):
+def drive(runner, visible, dt=0.001, t_end=30.0, seed=0, joints_until=math.inf,
+          detector_until=math.inf):
     """
     Drive ``runner`` with a fake robot that moves to each goal in 0.3 s.
 
     Its readings are quantised with the simulator's count and noise; the camera sees the ball at
-    120 Hz when visible.
+    120 Hz when visible. The joint states stop at ``joints_until``, the detections at
+    ``detector_until`` (s).
     """
     rng = np.random.default_rng(seed)
     q = 2 * np.pi / 163840
@@ -21,8 +26,9 @@ def drive(runner, visible, dt=0.001, t_end=30.0, seed=0):
             if a[0] == 'goal':
                 goal_time, start, target = t, Theta, np.full(3, (runner.index + 1) * 0.1)
         Theta = start + (target - start) * min(1.0, (t - goal_time) / 0.3)
-        runner.joint_state(t, np.round((Theta + rng.normal(scale=2e-5, size=3)) / q) * q)
-        if visible(runner.index) and round(t * 1000) % 8 == 0:
+        if t < joints_until:
+            runner.joint_state(t, np.round((Theta + rng.normal(scale=2e-5, size=3)) / q) * q)
+        if visible(runner.index) and round(t * 1000) % 8 == 0 and t < detector_until:
             runner.detection(t, np.array([0.0, 0.0, 0.3]) + 1e-5 * runner.index, np.eye(3) * 1e-10)
         runner.tick(t)
         t += dt
@@ -104,3 +110,54 @@ def test_a_replan_that_keeps_the_plan():
                            lambda rests, n: None, 1)
     actions = drive(runner, lambda k: True)
     np.testing.assert_array_equal([a[1] for _, a in actions if a[0] == 'goal'], poses)
+
+
+def test_balls_out_of_view_at_a_few_poses_in_a_row_do_not_stop_the_session():
+    poses = np.array([[0.1 * k, 0, 1.0] for k in range(1, 7)])
+    runner = SessionRunner(poses, RunnerConfig(frames_per_pose=10, settle_time=0.1))
+    drive(runner, lambda k: k not in (1, 2, 3, 4))
+    assert runner.failure is None and [r.index for r in runner.rests] == [0, 5]
+
+
+def stopped(silent_input, **silence):
+    """
+    Run a session whose ``silent_input`` stops at 2.5 s (``silence``: drive's keyword).
+
+    Return the runner, the stop time and the time limit; the limit is a pose's time-outs end to end
+    (4.2 s here).
+    """
+    config = RunnerConfig(frames_per_pose=10, settle_time=0.1, move_timeout=2.0,
+                          measure_timeout=2.0)
+    runner = SessionRunner(np.array([[0.1 * k, 0, 1.0] for k in range(1, 40)]), config)
+    actions = drive(runner, lambda k: True, **silence)
+    assert runner.state == DONE and runner.failure is not None
+    assert silent_input in runner.failure and 'longer than a pose can last' in runner.failure
+    return runner, actions[-1][0], session_limits.pose_time_limit(config)
+
+
+def test_a_detector_that_stops_stops_the_session_naming_it():
+    """
+    The session stops one pose time-limit after the last detection.
+
+    Within 2 ms: the 1 ms tick that notices it, and drive records actions one tick later.
+    """
+    runner, t_stop, limit = stopped('sphere/detection', detector_until=2.5)
+    last = runner.last_input['sphere/detection']
+    assert limit < t_stop - last <= limit + 0.002 and last < 2.5
+    assert 'sphere detector' in runner.failure and 'joint_states' not in runner.failure
+    assert len(runner.rests) >= 1 and runner.fraction < 1.0
+
+
+def test_joint_states_that_stop_stop_the_session_naming_them():
+    runner, t_stop, limit = stopped('joint_states', joints_until=2.5)
+    assert limit < t_stop - runner.last_input['joint_states'] <= limit + 0.002
+    assert 'sphere/detection' not in runner.failure
+
+
+def test_a_stop_while_measuring_closes_the_rest():
+    runner = SessionRunner(np.zeros((1, 3)), RunnerConfig(frames_per_pose=5, settle_time=0.0))
+    runner.start(0.0)
+    runner.state = MEASURING
+    runner.tick(session_limits.pose_time_limit(runner.config) + 0.1)
+    kinds = [a[0] for a in runner.take_actions()]
+    assert kinds[-2:] == ['rest_end', 'done'] and runner.state == DONE
