@@ -10,9 +10,14 @@ y down, z forward, m) as the camera (robotenis_vision.camera.Camera: K, plumb_bo
   within a pixel of it are supersampled (8x8 rays, the undistortion linearised across the pixel)
   for anti-aliasing;
 * shading at the surface point met by each ray: ambient + Lambertian diffuse for a light
-  direction + a Blinn-Phong specular highlight; values above 255 saturate as on a real sensor;
-* a background that is not flat: a linear gradient plus a smooth random texture;
-* a Gaussian blur (lens and focus), then Gaussian sensor noise and rounding to 8 bits.
+  direction (frontal, side or behind the ball) + a Blinn-Phong specular highlight; values above
+  255 saturate as on a real sensor;
+* a background (``Background.pattern``): a linear gradient plus a smooth random texture (flat when
+  both are zero), a checkerboard, or a random texture, with a defocus of its own (it lies at
+  another depth);
+* a Gaussian blur (lens and pixel) and a defocus (the uniform disc of a thin lens, ``defocus_px``
+  its radius), a response curve (``gamma``: grey = 255 (I / 255)^(1 / gamma)), then Gaussian
+  sensor noise and rounding to 8 bits.
 
 Speed (one 640x480 frame in a few ms): everything that depends only on the camera (the
 undistorted ray of every pixel), on the background and on the blur is computed once and cached; a
@@ -45,7 +50,15 @@ class Lighting:
 
 @dataclass(frozen=True)
 class Background:
-    """A linear gradient from ``low`` to ``high`` grey along ``angle`` (rad), plus a texture."""
+    """
+    The scene behind the ball, in grey levels, ``low`` to ``high``.
+
+    ``pattern``: 'gradient', a linear gradient along ``angle`` (rad) across the image; 'checker',
+    squares of ``square_px`` alternating low and high with edges at u, v = phase + k square_px;
+    'noise', white noise low-passed by a Gaussian of ``scale_px`` px mapped to low..high
+    (mean +- 2 standard deviations, clipped). Every pattern gets the smooth random ``texture`` on
+    top, and ``defocus_px`` blurs the whole background by a disc of that radius.
+    """
 
     low: float = 70.0
     high: float = 150.0
@@ -53,10 +66,36 @@ class Background:
     texture: float = 6.0          # standard deviation of the texture, grey levels
     texture_scale: float = 3.0    # its correlation length, px
     seed: int = 1
+    pattern: str = 'gradient'
+    square_px: float = 20.0
+    scale_px: float = 5.0
+    phase_px: tuple = (0.0, 0.0)
+    defocus_px: float = 0.0
+
+    def __post_init__(self):
+        if self.pattern not in PATTERNS:
+            raise ValueError(f"background pattern: one of {', '.join(PATTERNS)}, "
+                             f'got {self.pattern!r}')
+        if not (self.square_px > 0 and self.scale_px > 0) or self.defocus_px < 0:
+            raise ValueError('background: square_px and scale_px must be positive and '
+                             f'defocus_px not negative, got {self.square_px}, {self.scale_px}, '
+                             f'{self.defocus_px}')
+
+
+PATTERNS = ('gradient', 'checker', 'noise')
+
+
+@dataclass(frozen=True)
+class Optics:
+    """What the lens and the sensor do to the scene: Gaussian blur, defocus disc, response."""
+
+    blur_sigma: float
+    defocus_px: float
+    gamma: float
 
 
 def render(camera, sphere_centre_optical, radius, rng, lighting=Lighting(),
-           background=Background(), blur_sigma=0.8, noise_sigma=2.0):
+           background=Background(), blur_sigma=0.8, noise_sigma=2.0, defocus_px=0.0, gamma=1.0):
     """Render a mono8 image (height, width) of the sphere; the background only if out of view."""
     C = np.asarray(sphere_centre_optical, dtype=float)
     if C.shape != (3,) or not np.all(np.isfinite(C)):
@@ -64,14 +103,17 @@ def render(camera, sphere_centre_optical, radius, rng, lighting=Lighting(),
                          f'got {sphere_centre_optical!r}')
     if not radius > 0:
         raise ValueError(f'radius: must be positive, got {radius!r}')
-    if blur_sigma < 0 or noise_sigma < 0:
-        raise ValueError('blur_sigma and noise_sigma must not be negative, '
-                         f'got {blur_sigma}, {noise_sigma}')
-    bank = _background_bank(_camera_key(camera), background, float(blur_sigma), float(noise_sigma))
+    if blur_sigma < 0 or noise_sigma < 0 or defocus_px < 0:
+        raise ValueError('blur_sigma, noise_sigma and defocus_px must not be negative, '
+                         f'got {blur_sigma}, {noise_sigma}, {defocus_px}')
+    if not gamma > 0:
+        raise ValueError(f'gamma: must be positive, got {gamma!r}')
+    optics = Optics(float(blur_sigma), float(defocus_px), float(gamma))
+    bank = _background_bank(_camera_key(camera), background, optics, float(noise_sigma))
     frame = bank[rng.integers(len(bank))].copy()
     box = _sphere_box(camera, C, radius)
     if box is not None:
-        _draw_sphere(frame, camera, C, float(radius), lighting, background, float(blur_sigma),
+        _draw_sphere(frame, camera, C, float(radius), lighting, background, optics,
                      float(noise_sigma), rng, box)
     return frame
 
@@ -118,27 +160,61 @@ def _ray_maps(key):
 
 @functools.lru_cache(maxsize=8)
 def _raw_background(key, background):
-    """Return the background before blur: gradient plus texture (float32, height x width)."""
+    """Return the background before the lens: pattern plus texture (float32, height x width)."""
     width, height = key[2], key[3]
     rng = np.random.default_rng(background.seed)
     u, v = np.meshgrid(np.arange(width), np.arange(height))
-    s = (u * np.cos(background.angle) + v * np.sin(background.angle))
-    ramp = (background.low
-            + (background.high - background.low) * (s - s.min()) / max(s.max() - s.min(), 1))
+    low, high = background.low, background.high
+    if background.pattern == 'gradient':
+        s = (u * np.cos(background.angle) + v * np.sin(background.angle))
+        level = low + (high - low) * (s - s.min()) / max(s.max() - s.min(), 1)
+    elif background.pattern == 'checker':
+        level = low + (high - low) * _checker(width, height, background.square_px,
+                                              background.phase_px)
+    else:
+        white = rng.standard_normal((height, width))
+        smooth = cv2.GaussianBlur(white, (0, 0), background.scale_px)
+        level = low + (high - low) * np.clip(0.5 + 0.25 * smooth / smooth.std(), 0.0, 1.0)
     texture = rng.standard_normal((height, width))
     if background.texture_scale > 0:
         texture = cv2.GaussianBlur(texture, (0, 0), background.texture_scale)
     texture *= background.texture / max(texture.std(), 1e-12)
-    return (ramp + texture).astype(np.float32)
+    raw = (level + texture).astype(np.float32)
+    return _defocus(raw, background.defocus_px) if background.defocus_px > 0 else raw
+
+
+def _checker(width, height, square, phase, sub=4):
+    """Return the fraction of each pixel on the checkerboard's odd squares (4x4 samples)."""
+    g = (np.arange(sub) + 0.5) / sub - 0.5
+    u = ((np.arange(width)[:, None] + g - phase[0]) // square).astype(int)
+    v = ((np.arange(height)[:, None] + g - phase[1]) // square).astype(int)
+    return ((v[:, None, :, None] + u[None, :, None, :]) % 2).mean(axis=(2, 3))
+
+
+def _disc_kernel(radius, sub=8):
+    """Return the uniform disc of ``radius`` px as a normalised kernel (8x8 samples a pixel)."""
+    m = int(np.ceil(radius + 0.5))
+    g = (np.arange(sub) + 0.5) / sub - 0.5
+    x = (np.arange(-m, m + 1)[:, None] + g).ravel()
+    inside = (x[:, None] ** 2 + x[None, :] ** 2 <= radius * radius).astype(np.float32)
+    n = 2 * m + 1
+    kernel = inside.reshape(n, sub, n, sub).mean(axis=(1, 3))
+    if kernel.sum() == 0:          # a disc smaller than the samples' spacing: a point
+        kernel[m, m] = 1.0
+    return kernel / kernel.sum()
+
+
+def _defocus(image, radius):
+    return cv2.filter2D(image, -1, _disc_kernel(radius), borderType=cv2.BORDER_REFLECT)
 
 
 @functools.lru_cache(maxsize=8)
-def _blurred_background(key, background, blur_sigma):
-    return _blur(_raw_background(key, background), blur_sigma)
+def _blurred_background(key, background, optics):
+    return _respond(_blur(_raw_background(key, background), optics), optics.gamma)
 
 
 @functools.lru_cache(maxsize=4)
-def _background_bank(key, background, blur_sigma, noise_sigma):
+def _background_bank(key, background, optics, noise_sigma):
     """
     Return BANK finished frames (uint8) of the blurred background with independent noise.
 
@@ -146,7 +222,7 @@ def _background_bank(key, background, blur_sigma, noise_sigma):
     noise only repeats where nothing is measured.
     """
     rng = np.random.default_rng(12345)
-    base = _blurred_background(key, background, blur_sigma)
+    base = _blurred_background(key, background, optics)
     frames = []
     for _ in range(BANK if noise_sigma > 0 else 1):
         frame = base + noise_sigma * rng.standard_normal(base.shape, dtype=np.float32)
@@ -154,15 +230,26 @@ def _background_bank(key, background, blur_sigma, noise_sigma):
     return np.stack(frames)
 
 
-def _kernel_radius(blur_sigma):
-    return int(np.ceil(4 * blur_sigma)) if blur_sigma > 0 else 0
+def _kernel_radius(optics):
+    blur = int(np.ceil(4 * optics.blur_sigma)) if optics.blur_sigma > 0 else 0
+    return blur + (int(np.ceil(optics.defocus_px + 0.5)) if optics.defocus_px > 0 else 0)
 
 
-def _blur(image, blur_sigma):
-    if blur_sigma <= 0:
-        return image.copy()
-    k = 2 * _kernel_radius(blur_sigma) + 1
-    return cv2.GaussianBlur(image, (k, k), blur_sigma, borderType=cv2.BORDER_REFLECT)
+def _blur(image, optics):
+    out = image
+    if optics.blur_sigma > 0:
+        k = 2 * int(np.ceil(4 * optics.blur_sigma)) + 1
+        out = cv2.GaussianBlur(out, (k, k), optics.blur_sigma, borderType=cv2.BORDER_REFLECT)
+    if optics.defocus_px > 0:
+        out = _defocus(out, optics.defocus_px)
+    return out.copy() if out is image else out
+
+
+def _respond(image, gamma):
+    """Apply the sensor's response: 255 (I / 255)^(1 / gamma), I clipped to 0..255."""
+    if gamma == 1.0:
+        return image
+    return (255.0 * (np.clip(image, 0.0, 255.0) / 255.0) ** (1.0 / gamma)).astype(np.float32)
 
 
 def _to_uint8(frame):
@@ -285,22 +372,22 @@ def _grow(box, m, camera):
     return max(u0 - m, 0), min(u1 + m, camera.width), max(v0 - m, 0), min(v1 + m, camera.height)
 
 
-def _draw_sphere(frame, camera, C, R, lighting, background, blur_sigma, noise_sigma, rng, box):
+def _draw_sphere(frame, camera, C, R, lighting, background, optics, noise_sigma, rng, box):
     """
     Render the ball in its box, blur, add fresh noise and write the result into the frame.
 
     With m the blur's radius: the blurred ball reaches m beyond its box, and blurring that needs m
     more of the unblurred background; the outer ring takes the cached blurred background instead.
     """
-    m = _kernel_radius(blur_sigma)
+    m = _kernel_radius(optics)
     near, far = _grow(box, m, camera), _grow(box, 2 * m, camera)
     cover, shade = _coverage_and_shade(camera, C, R, lighting, box)
     key = _camera_key(camera)
     raw = _raw_background(key, background)[far[2]:far[3], far[0]:far[1]].copy()
     b = (slice(box[2] - far[2], box[3] - far[2]), slice(box[0] - far[0], box[1] - far[0]))
     raw[b] += cover * (shade - raw[b])
-    patch = _blur(raw, blur_sigma)
-    out = _blurred_background(key, background, blur_sigma)[far[2]:far[3], far[0]:far[1]].copy()
+    patch = _respond(_blur(raw, optics), optics.gamma)
+    out = _blurred_background(key, background, optics)[far[2]:far[3], far[0]:far[1]].copy()
     n = (slice(near[2] - far[2], near[3] - far[2]), slice(near[0] - far[0], near[1] - far[0]))
     out[n] = patch[n]
     if noise_sigma > 0:
@@ -370,7 +457,7 @@ def render_circles(camera, centres, normals, radii, rng, plate=230.0, ink=25.0, 
             u0, u1, v0, v1 = box
             cover[v0:v1, u0:u1] = np.maximum(cover[v0:v1, u0:u1],
                                              _disc_coverage(camera, c, n, r, box))
-    image = _blur(plate + (ink - plate) * cover, blur_sigma)
+    image = _blur(plate + (ink - plate) * cover, Optics(float(blur_sigma), 0.0, 1.0))
     if noise_sigma > 0:
         image += noise_sigma * rng.standard_normal(image.shape, dtype=np.float32)
     return _to_uint8(image)

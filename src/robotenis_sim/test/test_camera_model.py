@@ -73,6 +73,51 @@ def test_shading_background_and_repeatability():
                   - int(np.median(empty[225:255, 305:335]))).max() < 40
 
 
+def test_checker_noise_defocus_and_response_backgrounds():
+    """
+    Check the background patterns, the defocus disc and the response curve, without noise.
+
+    A checkerboard's squares alternate low and high with edges at phase + k square_px (its
+    pixels straddling an edge are the fraction on each side); the random texture stays within
+    low..high; a defocus keeps the mean level and spreads an edge over its disc's diameter; a
+    disc smaller than a pixel's samples is no blur (and no NaN); the response maps a linear grey
+    I to 255 (I / 255)^(1 / gamma), within the 8-bit rounding.
+    """
+    far = [0.0, 0.0, -1.0]
+    checker = cm.Background(pattern='checker', low=40.0, high=200.0, texture=0.0,
+                            square_px=20.0, phase_px=(10.0, 0.0))
+    image = cm.render(CAM, far, R, np.random.default_rng(0), background=checker,
+                      blur_sigma=0.0, noise_sigma=0.0).astype(float)
+    row = image[5]
+    assert row[15] == row[25] and row[35] == row[45] and {row[25], row[35]} == {40.0, 200.0}
+    # pixel 10 (9.5..10.5) straddles the edge at u = 10: half of its 4x4 samples on each side
+    assert image[5, 10] == 120.0 and abs(image[5, 11] - image[5, 9]) == 160.0
+    noise = cm.Background(pattern='noise', low=60.0, high=180.0, texture=0.0, scale_px=4.0)
+    textured = cm.render(CAM, far, R, np.random.default_rng(0), background=noise,
+                         blur_sigma=0.0, noise_sigma=0.0)
+    assert textured.min() >= 60 and textured.max() <= 180 and textured.std() > 10
+    flat = cm.Background(pattern='checker', low=40.0, high=200.0, texture=0.0, square_px=40.0)
+    sharp = cm.render(CAM, far, R, np.random.default_rng(0), background=flat, blur_sigma=0.0,
+                      noise_sigma=0.0).astype(float)
+    blurred = cm.render(CAM, far, R, np.random.default_rng(0), background=flat, blur_sigma=0.0,
+                        noise_sigma=0.0, defocus_px=3.0).astype(float)
+    assert abs(blurred[40:440, 40:600].mean() - sharp[40:440, 40:600].mean()) < 0.5
+    across = blurred[20, 30:50]                 # the edge at u = 39.5, spread over +- 3 px
+    assert np.all(np.diff(across) >= 0) or np.all(np.diff(across) <= 0)
+    assert np.sum((across > 41) & (across < 199)) in (6, 7)
+    tiny = cm.render(CAM, far, R, np.random.default_rng(0), background=flat, blur_sigma=0.0,
+                     noise_sigma=0.0, defocus_px=0.01)
+    np.testing.assert_array_equal(tiny, sharp.astype(np.uint8))
+    grey = cm.Background(low=100.0, high=100.0, texture=0.0)
+    bright = cm.render(CAM, far, R, np.random.default_rng(0), background=grey, noise_sigma=0.0,
+                       gamma=2.2)
+    assert abs(float(bright.mean()) - 255 * (100 / 255) ** (1 / 2.2)) <= 0.5
+    with pytest.raises(ValueError, match='pattern'):
+        cm.Background(pattern='stripes')
+    with pytest.raises(ValueError, match='gamma'):
+        cm.render(CAM, far, R, np.random.default_rng(0), gamma=0.0)
+
+
 def test_sphere_in_optical_frame_from_the_mounting():
     truth = sim_truth.load()
     P = np.array([0.01, 0.02, 0.8])

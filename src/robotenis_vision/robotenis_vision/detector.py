@@ -1,37 +1,52 @@
 """
-One function to measure the ball in an image: ``detect(image, camera, radius, method)``.
+One function to measure the ball in an image: ``detect(image, camera, radius, method, prior)``.
 
 Methods (all return the sphere centre in the optical frame, m, with a covariance):
 
-* ``'conic'`` (default): sub-pixel outline (robotenis_vision.edges), Taubin conic, closed-form
-  centre and geometric refinement (robotenis_vision.conic);
+* ``'model'`` (default): the image modelled pixel by pixel near the outline (the ball's shading
+  with its square-root limb, the blur, a local background) and fitted by Gauss-Newton
+  (robotenis_vision.model_fit): the accurate one;
+* ``'conic'``: sub-pixel outline points (robotenis_vision.edges), Taubin conic, closed-form centre
+  and geometric refinement (robotenis_vision.conic): the fast one;
 * ``'paper'``: the same outline points, the paper's tangent lines and ellipse correction
   (robotenis_vision.paper_method, eqs. 9-22); ``'tangent'``: its tangent lines alone (eqs. 9-16);
-* ``'baseline'``: threshold, OpenCV's fitEllipse, centre back-projected, depth from the apparent
-  size (robotenis_vision.baseline).
+* ``'baseline'``: a midpoint threshold, the largest round contour, OpenCV's fitEllipse
+  (robotenis_vision.baseline).
+
+Without a prior the balls are looked for (robotenis_vision.search): radial-symmetry votes give
+candidates, the steep points of rays from each must agree on one sphere of the known radius
+(RANSAC), and the best of those are measured; each must show its edge around MIN_ARC of its
+outline. Two balls measured in the image, each clear to the model fit (its edge around the
+outline, its pixels kept: SECOND_BALL) and alike (contrast and blur: _alike), make it
+ambiguous: it is refused (DetectionError), by every method. With a prior (the previous frame's
+Detection), the outline is measured where it was, and the search runs only if it is not found
+there.
 
 The outline is measured in ideal (undistorted) pixels, K [x, y, 1] for the ray (x, y, 1): there the
-sphere's outline is exactly an ellipse. Profiles are laid out in ideal pixels and sampled at their
-distorted image positions (the forward plumb_bob model: no iterative undistortion per point).
-Steps: a rough circle in the image, coarse outermost-gradient points on rays from it, a first
-sphere from them (RANSAC on triples of rays, then Taubin + closed form), then the profile model
-along the normals of that sphere's ellipse, with the blur estimated on the way
-(robotenis_vision.edges). Frames that cannot be trusted raise DetectionError with the reason: no
-sphere found, the ball touching the image border, too few outline points with contrast, too short
-an arc of outline.
+sphere's outline is exactly an ellipse. Frames that cannot be trusted raise DetectionError with
+the reason: no ball found, two balls, the ball touching the image border, too little of the
+outline with contrast.
 """
 import numpy as np
 
-from robotenis_vision import baseline, conic, edges, paper_method
+from robotenis_vision import baseline, conic, edges, model_fit, paper_method, search
 from robotenis_vision.detection import Detection, DetectionError, RANGE
 
-METHODS = ('conic', 'paper', 'tangent', 'baseline')
+METHODS = ('model', 'conic', 'paper', 'tangent', 'baseline')
+CANDIDATES = 24                # vote peaks whose outline is checked
+MIN_SCORE = 0.5                # of the rays from a candidate must agree on its sphere
+MEASURED = 3                   # confirmed spheres measured, best first
+MAX_RMS = 2.5                  # model fit: residual RMS over the noise beyond which it misfits
+MIN_KEPT = 0.6                 # model fit: of the pixels its robust weights must keep
+MAX_FLIPS = 6                  # sign changes of the edge's step around the outline, at most
+SECOND_BALL = 0.75             # a ball this clear (_clarity) makes a second one ambiguous
+SECOND_STEP, SECOND_BLUR = 0.5, 2.0   # and if alike (_alike)
+MIN_ARC_MODEL = np.deg2rad(160)  # the model fits the known sphere to a shorter arc
 RAY_SPACING = 1.5              # px between profiles along the outline
 MIN_EDGE_POINTS = 16
 MIN_FRACTION = 0.4             # of the outline's profiles must find the edge with contrast
 MIN_ARC = np.deg2rad(200)      # the outline points must cover this much of the outline
 BLUR_GUESS = 1.0               # px: the first profiles' blur, before the frame's is estimated
-COARSE_TOLERANCE_PX = 1.0      # coarse (steepest-gradient) outline points agreeing with a sphere
 PRIOR_MIN_FRACTION = 0.6       # profiles that must find the edge near a prior's outline
 
 
@@ -50,38 +65,171 @@ def check_image(image, camera):
     return image.astype(np.float32)
 
 
-def detect(image, camera, radius, method='conic', prior=None):
+def detect(image, camera, radius, method='model', prior=None, gamma=1.0):
     """
     Measure the sphere of ``radius`` (m) in ``image`` (mono, as the camera gives it): a Detection.
 
     ``prior``: the Detection of a previous frame of the same scene (a ball at rest, a slow one).
-    Its outline then stands in for the search (rough circle, coarse rays, RANSAC) and its blur for
-    the blur estimate: about half the time. If the outline is not found where it says, the search
-    is run after all.
+    The outline is then measured where it was (no search): about half the time. If it is not found
+    there, the search is run after all. ``gamma``: the camera's response (grey = 255 (I / 255)^(1 /
+    gamma); 1 for a linear camera), used by the model method.
     """
     if method not in METHODS:
         raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
     if not radius > 0:
         raise ValueError(f'radius: must be positive, got {radius!r}')
+    if not gamma > 0:
+        raise ValueError(f'gamma: must be positive, got {gamma!r}')
     img = check_image(image, camera)
-    if method == 'baseline':
-        return baseline.detect(img, camera, radius)
+    if prior is not None and method != 'baseline':
+        try:
+            return measure(img, camera, radius, method, np.asarray(prior.position, dtype=float),
+                           prior.extra.get('psf_sigma', BLUR_GUESS), gamma)
+        except DetectionError:
+            pass
+    found, failures = [], []
+    for sphere in find(img, camera, radius):
+        try:
+            det = measure(img, camera, radius, method, sphere.c, BLUR_GUESS, gamma)
+        except DetectionError as e:
+            failures.append(str(e))
+            continue
+        if not any(_same_ball(det.position, d.position, radius) for d, _, _ in found):
+            found.append((det, sphere.score, sphere.c))
+    if not found:
+        if failures:
+            raise DetectionError(failures[0])
+        raise DetectionError('no sphere: no round outline of a plausible size in the image')
+    if len(found) == 1:
+        return found[0][0]
+    views = [_model_view(img, camera, radius, d, c, gamma) for d, _, c in found]
+    ranked = sorted(zip(found, views), key=lambda f: -f[0][1] * _clarity(f[1]))
+    first = ranked[0][1]
+    others = [v for _, v in ranked[1:] if _clarity(v) >= SECOND_BALL]
+    if _clarity(first) >= SECOND_BALL and any(_alike(first, v) for v in others):
+        second = next(v for v in others if _alike(first, v))
+        a, b = (camera.project(v.position) for v in (first, second))
+        raise DetectionError(f'two balls in view, at pixels ({a[0]:.0f}, {a[1]:.0f}) and '
+                             f'({b[0]:.0f}, {b[1]:.0f}): ambiguous, not measured')
+    return ranked[0][0][0]
+
+
+def _model_view(img, camera, radius, det, c, gamma):
+    """
+    Return the model fit's Detection of a found ball, or None if it fails.
+
+    A detection by another method is fitted again from the search's sphere c (m).
+    """
+    if det.method == 'model':
+        return det
     try:
-        ideal, fit, sigma, c0 = outline(img, camera, radius, prior)
+        return measure(img, camera, radius, 'model', c, BLUR_GUESS, gamma)
     except DetectionError:
-        if prior is None:
-            raise
-        ideal, fit, sigma, c0 = outline(img, camera, radius)
+        return None
+
+
+def _clarity(view):
+    """Return how clearly a model Detection is a ball, 0 to 1: its edge's coverage, pixels kept."""
+    if view is None:
+        return 0.0
+    return view.extra['coverage'] / (2 * np.pi) * view.extra['kept']
+
+
+def _alike(a, b):
+    """
+    Return whether two model Detections are alike enough for the image to be ambiguous.
+
+    Two balls of one scene stand out of their background alike and are blurred alike by the lens:
+    the second one's edge step must be at least SECOND_STEP of the first's and its blur at most
+    SECOND_BLUR times the first's (plus half a pixel). A texture's round blob, weaker and softer,
+    is not a second ball.
+    """
+    return (b.extra['step'] >= SECOND_STEP * a.extra['step']
+            and b.extra['psf_sigma'] <= SECOND_BLUR * a.extra['psf_sigma'] + 0.5)
+
+
+def _same_ball(a, b, R):
+    return np.linalg.norm(np.asarray(a) - np.asarray(b)) < 2 * R
+
+
+def find(img, camera, radius):
+    """
+    Return the spheres whose outline the image shows, best first (robotenis_vision.search).
+
+    The vote peaks (and the rough circle of edges.rough_circle, which a clean image gives fastest)
+    are confirmed by their rays; at most MEASURED distinct spheres with MIN_SCORE of their rays on
+    the outline, within RANGE of the camera.
+    """
+    r_min, r_max = camera.fx * radius / RANGE[1], camera.fx * radius / RANGE[0]
+    candidates = search.candidates(img, r_min, r_max)[:CANDIDATES]
+    try:
+        centre, r = edges.rough_circle(img, r_min, r_max)
+        candidates.insert(0, search.Candidate(centre, r, 1.0))
+    except edges.EdgeError:
+        pass
+    spheres = []
+    for cand in candidates:
+        sphere = search.confirm(img, camera, radius, cand)
+        if (sphere is None or sphere.score < MIN_SCORE or not sphere.c[2] > radius
+                or not RANGE[0] <= np.linalg.norm(sphere.c) <= RANGE[1]):
+            continue
+        same = [k for k, s in enumerate(spheres) if _same_ball(s.c, sphere.c, radius)]
+        if same:
+            if sphere.score > spheres[same[0]].score:
+                spheres[same[0]] = sphere
+            continue
+        spheres.append(sphere)
+    spheres.sort(key=lambda s: -s.score)
+    return spheres[:MEASURED]
+
+
+def measure(img, camera, radius, method, c0, blur, gamma=1.0):
+    """
+    Measure the sphere whose outline lies near that of sphere c0 (m), by ``method``.
+
+    DetectionError when its edge is not seen around MIN_ARC of the outline, or the fit misfits.
+    A ball's edge changes sign (brighter or darker than its background) a few times around it at
+    most; a checkerboard's or a texture's, all the time (MAX_FLIPS). From a search's
+    start (``blur`` BLUR_GUESS) the model is fitted twice: first without the limb's shading, which
+    pulls an outline a pixel or two off into place.
+    """
+    if method == 'baseline':
+        centre = camera.project(c0)
+        r = camera.fx * radius / np.sqrt(c0 @ c0 - radius * radius)
+        return baseline.detect(img, camera, radius, centre, r)
+    if method == 'model':
+        if blur == BLUR_GUESS:
+            first = model_fit.fit(img, camera, radius, c0, 1.5, gamma, iterations=4, limb=False)
+            c0, blur = first.c, first.blur
+        fit = model_fit.fit(img, camera, radius, c0, blur, gamma)
+        covered = fit.coverage()
+        flips = fit.polarity_flips()
+        if flips > MAX_FLIPS:
+            raise DetectionError(f'the outline changes polarity {flips} times: a pattern of the '
+                                 'background, not a ball')
+        if covered < MIN_ARC_MODEL:
+            raise DetectionError(f'outline seen over only {np.degrees(covered):.0f} deg '
+                                 '(low contrast against the background)')
+        if fit.rms > MAX_RMS or fit.kept < MIN_KEPT:
+            raise DetectionError(f'the ball model misfits the image (residual {fit.rms:.1f} '
+                                 f'times the noise, {100 * fit.kept:.0f} % of the pixels kept)')
+        edge = ellipse_points(camera, fit.c, radius)[0]
+        step = np.abs(fit.levels[:, 2] - fit.levels[:, 0])[fit.edge_bins()]
+        return Detection(fit.c, fit.cov, edge, float('nan'), 'model',
+                         {'psf_sigma': fit.blur, 'noise': fit.noise, 'coverage': covered,
+                          'rms': fit.rms, 'kept': fit.kept, 'iterations': fit.iterations,
+                          'step': float(np.median(step))})
+    ideal, pf, sigma, c_out = outline(img, camera, radius, c0, blur)
     xy = camera.to_normalized(ideal)
-    weights = 1.0 / np.maximum(fit.sigma_e, 0.02) ** 2      # floored: no point outweighs the rest
+    weights = 1.0 / np.maximum(pf.sigma_e, 0.02) ** 2      # floored: no point outweighs the rest
     if method in ('paper', 'tangent'):
-        c = _conic(xy, ideal, camera, radius, weights, c0).position
+        c = _conic(xy, ideal, camera, radius, weights, c_out).position
         _check_arc(ideal, camera.to_pixels(c[:2] / c[2]))
         det = paper_method.detect_from_outline(img, camera, radius, xy, sigma,
                                                _window(camera, c, radius, sigma),
                                                0 if method == 'tangent' else None)
     else:
-        det = _conic(xy, ideal, camera, radius, weights, c0)
+        det = _conic(xy, ideal, camera, radius, weights, c_out)
         _check_arc(det.edge_points, camera.to_pixels(det.position[:2] / det.position[2]))
     det.extra['psf_sigma'] = sigma
     return det
@@ -103,35 +251,21 @@ def _conic(xy, ideal, camera, radius, weights, c0):
                      'conic', {'correlation_inflation': inflation})
 
 
-def search(img, camera, radius):
-    """Where the sphere is, without a prior: rough circle, coarse rays, RANSAC sphere (m)."""
-    r_min, r_max = camera.fx * radius / RANGE[1], camera.fx * radius / RANGE[0]
-    try:
-        centre, r = edges.rough_circle(img, r_min, r_max)
-    except edges.EdgeError as e:
-        raise DetectionError(str(e)) from None
-    coarse, _ = edges.radial_edges(img, camera.undistort_pixels(centre), r,
-                                   warp=camera.distort_pixels)
-    return coarse_sphere(camera.to_normalized(coarse), camera, radius)
-
-
-def outline(img, camera, radius, prior=None):
+def outline(img, camera, radius, c, blur):
     """
-    Measure the sphere's outline points in ideal pixels.
+    Measure the outline points, in ideal pixels, of the sphere whose outline is near sphere c's.
 
     Returns the points (n, 2), their edges.ProfileFit, the frame's blur sigma (px) and the sphere
-    (m) whose outline the profiles were laid along.
+    (m) whose outline the profiles were laid along. ``blur``: the blur (px) to start from; it is
+    estimated again unless it is a previous frame's (not BLUR_GUESS).
 
     The profiles look for the edge within edges.REACH of the predicted outline; when the outline
     found lies near that limit on average, the prediction was off and the profiles are laid again
     along the outline found (at most twice).
     """
-    if prior is None:
-        c, blur = search(img, camera, radius), BLUR_GUESS
-    else:
-        c, blur = np.asarray(prior.position, dtype=float), prior.extra.get('psf_sigma', BLUR_GUESS)
+    c = np.asarray(c, dtype=float)
     # the blur is the lens's: with a prior of the same scene it is kept
-    refit = prior is None
+    refit = from_search = blur == BLUR_GUESS
     for attempt in range(3):
         pts, normals, kappa, fit, blur = _profiles(img, camera, c, radius, blur, refit)
         refit = False
@@ -146,7 +280,7 @@ def outline(img, camera, radius, prior=None):
     if moved >= 0.5 * edges.REACH:
         raise DetectionError(f'the outline keeps moving ({moved:.1f} px on average): '
                              'no stable edge')
-    if prior is not None and fit.ok.mean() < PRIOR_MIN_FRACTION:
+    if not from_search and fit.ok.mean() < PRIOR_MIN_FRACTION:
         raise DetectionError('the outline is not where the prior puts it')
     keep = fit.ok
     points = pts[keep] + fit.e[keep, None] * normals[keep]
@@ -171,21 +305,6 @@ def _profiles(img, camera, c, radius, blur, refit_blur):
         raise DetectionError(f'only {int(fit.ok.sum())} of {len(fit.ok)} outline points '
                              f'with enough contrast (need {needed})')
     return pts, normals, kappa, fit, blur
-
-
-def coarse_sphere(xy, camera, radius):
-    """
-    Find a first sphere from coarse outline points (normalized).
-
-    Robust to the points that caught the highlight or the terminator instead of the limb: RANSAC on
-    triples (conic.ransac_sphere).
-    """
-    if len(xy) < MIN_EDGE_POINTS:
-        raise DetectionError(f'no sphere: only {len(xy)} coarse outline points')
-    try:
-        return conic.ransac_sphere(xy, radius, camera.fx, COARSE_TOLERANCE_PX)[0]
-    except conic.ConicError as e:
-        raise DetectionError(f'no sphere: {e}') from None
 
 
 def _window(camera, c, R, sigma):

@@ -6,7 +6,14 @@ publishes sphere/position (geometry_msgs/PointStamped, optical frame, m, stamp o
 sphere/detection (robotenis_interfaces/SphereDetection: covariance, frames, edge points, fit RMS,
 method). With ``frames`` > 1 it publishes the average of every ``frames`` detections (outliers
 rejected, robotenis_vision.averaging), stamped with the last image. A frame it cannot trust is
-dropped with the reason in a rate-limited log line. Parameters: the table PARAMETERS.
+dropped with the reason in a rate-limited log line (two balls in view among them: ambiguous).
+
+Two methods (robotenis_vision.rest): ``method`` (default 'conic', seeded by the last frame: about
+1.5 ms a frame, a search of the whole image when the seed is lost) on every frame, and once the
+ball has stood still in the image (its centre moved less than ``rest_motion_px`` for
+``rest_frames`` frames: the robot at rest) ``rest_method`` (default 'model', the accurate fit,
+about 20-40 ms a frame) refines that detection, and is published instead; while the ball moves
+the fast one is (figures: ``./robotenis bench vision``). Parameters: the table PARAMETERS.
 """
 import sys
 
@@ -19,10 +26,16 @@ from robotenis_kinematics import description
 from robotenis_ros.convert import image_array, point_stamped
 from robotenis_ros.node import declare_parameters, spin
 from robotenis_vision import averaging, camera as camera_model, detector
+from robotenis_vision.rest import RestSwitch
 from sensor_msgs.msg import CameraInfo, Image
 
 PARAMETERS = {
-    'method': ('conic', f"one of {', '.join(detector.METHODS)}"),
+    'method': ('conic', f"on every frame: one of {', '.join(detector.METHODS)}"),
+    'rest_method': ('model', 'once the ball stands still in the image: refines the detection '
+                             "(one of the methods, or '' for never)"),
+    'rest_motion_px': (0.3, 'px: the ball stands still when its centre moves less between frames'),
+    'rest_frames': (3, 'frames it must stand still for rest_method'),
+    'gamma': (1.0, "the camera's response, grey = 255 (I / 255)^(1 / gamma) (1: linear)"),
     'radius': (0.0, 'm: the sphere radius (0: from the robot description)'),
     'description_path': (description.config_path('nominal.yaml'), 'the robot description YAML'),
     'frames': (1, 'detections averaged per published measurement'),
@@ -48,10 +61,17 @@ class SphereDetectorNode(Node):
     def __init__(self):
         super().__init__('sphere_detector')
         p = declare_parameters(self, PARAMETERS)
-        self.method = p['method']
+        self.method, self.rest_method = p['method'], p['rest_method']
         if self.method not in detector.METHODS:
             raise ValueError(f"method must be one of {', '.join(detector.METHODS)}, "
                              f'got {self.method!r}')
+        if self.rest_method not in detector.METHODS + ('',):
+            raise ValueError(f"rest_method must be one of {', '.join(detector.METHODS)} or '', "
+                             f'got {self.rest_method!r}')
+        self.rest = RestSwitch(float(p['rest_motion_px']), int(p['rest_frames']))
+        self.gamma = float(p['gamma'])
+        if not self.gamma > 0:
+            raise ValueError(f'gamma must be positive, got {self.gamma}')
         self.radius = float(p['radius']) or description.load(p['description_path']).sphere_radius
         self.frames = max(1, int(p['frames']))
         self.max_rms = float(p['max_fit_rms_px'])
@@ -65,7 +85,8 @@ class SphereDetectorNode(Node):
         self.create_subscription(CameraInfo, 'camera/camera_info', self.on_camera_info,
                                  qos_profile_sensor_data)
         self.create_subscription(Image, 'camera/image_raw', self.on_image, qos_profile_sensor_data)
-        self.get_logger().info(f'sphere radius {self.radius * 1e3:.2f} mm, method {self.method}, '
+        self.get_logger().info(f'sphere radius {self.radius * 1e3:.2f} mm, method {self.method}'
+                               f"{', at rest ' + self.rest_method if self.rest_method else ''}, "
                                f'{self.frames} frame(s) per measurement')
 
     def drop(self, reason):
@@ -87,15 +108,19 @@ class SphereDetectorNode(Node):
             return
         prior, self.prior = self.prior, None
         try:
-            det = detector.detect(image_array(msg), self.camera, self.radius, self.method, prior)
+            image = image_array(msg)
+            det = detector.detect(image, self.camera, self.radius, self.method, prior,
+                                  self.gamma)
         except (ValueError, detector.DetectionError) as e:
             self.drop(str(e))
-            return
-        if np.isfinite(det.fit_rms_px) and det.fit_rms_px > self.max_rms:
-            self.drop(f'outline fit RMS {det.fit_rms_px:.2f} px > {self.max_rms} px')
+            self.rest.lost()
             return
         if self.use_prior and det.method != 'baseline':
             self.prior = det
+        det = self.at_rest(image, det)
+        if np.isfinite(det.fit_rms_px) and det.fit_rms_px > self.max_rms:
+            self.drop(f'outline fit RMS {det.fit_rms_px:.2f} px > {self.max_rms} px')
+            return
         if self.frames == 1:
             self.publish(det, msg.header, 1)
             return
@@ -106,6 +131,25 @@ class SphereDetectorNode(Node):
             det.position, det.covariance = avg.position, avg.covariance
             self.batch = []
             self.publish(det, msg.header, avg.frames)
+
+    def at_rest(self, image, det):
+        """
+        Return the detection to publish: the rest method's once the ball has stood still.
+
+        Standing still: its image moved less than rest_motion_px since the last frame, for
+        rest_frames frames (robotenis_vision.rest). The rest method starts from the fast
+        detection; if it fails, the fast detection is published.
+        """
+        still = self.rest.update(self.camera.project(det.position))
+        if not self.rest_method or self.rest_method == self.method or not still:
+            return det
+        try:
+            return detector.detect(image, self.camera, self.radius, self.rest_method, det,
+                                   self.gamma)
+        except detector.DetectionError as e:
+            self.get_logger().info(f'{self.rest_method} at rest: {e}; '
+                                   f'{det.method} published', throttle_duration_sec=5.0)
+            return det
 
     def publish(self, det, header, frames):
         header.frame_id = header.frame_id or 'camera_optical'

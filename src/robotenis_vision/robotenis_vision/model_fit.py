@@ -1,0 +1,493 @@
+"""
+The model method: the ball's image near its outline, modelled pixel by pixel and fitted.
+
+Every pixel of an annulus around the outline is predicted from the sphere (centre c, the known
+radius R) and the lens blur, and c is found by Gauss-Newton on those pixels with robust weights.
+Across the outline at a pixel whose signed distance to it is t (px, positive inside), blurred by a
+Gaussian of width s (lens and pixel), the image is
+
+    outside:  b0 + b1 (-t)                                  the local background and its slope
+    inside:   a0 + a1 (sin(i) - 1) + beta(phi) cos(i)       the ball's shading near its limb
+
+with i the angle between the ball's surface normal and the line of sight at the pixel. The four
+levels are fitted per bin of the outline (BIN_ARC_PX of it), each with a slope along the bin (a
+gradient, a texture, a lit and a dark side of the ball): 8 per bin. A Lambertian ball under a
+light from direction l is amb + D max(0, n.l); near the limb n = sin(i) m + cos(i) v (m the
+outline's normal, v toward the camera), so the shading is a0 + a1 sin(i) + beta cos(i) with beta =
+D (v.l). Since cos(i) grows as the square root of the depth inside (cos^2(i) = w2' t near the
+limb), that term is what a model linear in t takes for part of the step, and reads the ball too
+far (a few tenths of a percent of the range with a frontal light). Its coefficient is one function
+around the outline, beta0 + beta1 cos(phi) + beta2 sin(phi) (phi the direction of the outline's
+normal): three coefficients for the ball, so that the bins' levels cannot trade it against the
+edge. Blurred:
+
+    H(-t), -t H(-t), H(t)  ->  1 - Phi, s (phi - tau (1 - Phi)), Phi          (tau = t / s)
+    (sin(i) - 1) H(t)      ->  -(w2' / 2) s (tau Phi + phi) + the rest, unblurred (O(t^2))
+    cos(i) H(t)            ->  sqrt(w2' s) g(tau) + the rest, unblurred (O(t^1.5))
+
+where g(tau) = E[sqrt((tau + N(0, 1))^+)] (a parabolic cylinder function, tabulated), and tau is
+taken at t - s^2 kappa / 2: a blurred curved step appears that much inside the outline (kappa its
+curvature). Known limit: where the terminator crosses the limb the shading is clamped
+(max(0, n.l)) and this model misreads it (benchmarks/vision.py measures it).
+
+Geometry. The outline is the cone of rays touching the sphere, q(u) = (r.c)^2 - (c.c - R^2) r.r = 0
+for the ray r = K^-1 (u, 1) of an ideal (undistorted) pixel u (C1 of robotenis_vision.conic). A
+pixel's distance to it is measured from its foot point (two Sampson steps onto the conic), scaled
+to image pixels by the lens distortion's stretch along the normal; its derivative in c is
+(dq/dc) / |grad q| at the foot point.
+
+Solution. The levels and beta are linear: the bins' levels are eliminated bin by bin (a Schur
+complement), leaving a small system in (c, s, beta) for each Gauss-Newton step. Pixels get Tukey's
+biweight of their residual (a highlight, a background edge) and a bin whose residuals exceed the
+noise is down-weighted as a whole (what the model cannot follow); saturated pixels get none. The
+image is first linearised by the camera's response (``gamma``), each pixel weighted by its noise
+there, and the ball, the background and the edge zone by their own noise levels. The covariance
+of c is sigma^2 times the (c, c) block of the inverse weighted normal matrix, sigma the pixel
+noise from differences of neighbouring pixels' residuals (blind to the smooth part of what the
+model misses, which repeats from frame to frame and is no noise).
+"""
+from dataclasses import dataclass, field
+import functools
+
+import numpy as np
+from robotenis_vision.detection import DetectionError
+from scipy.special import gamma as gamma_function, ndtr, pbdv
+
+TUKEY = 4.685                  # biweight constant, in robust sigmas (95 % efficiency)
+BIN_ARC_PX = 6.0               # outline length per bin of levels
+MIN_BINS, MAX_BINS = 12, 96
+BIN_EXCESS = 2.0               # a bin's weight: (1 + k) / (excess + k), excess = its MSE / noise^2
+SATURATED = (0.5, 254.5)       # grey levels: a pixel at the sensor's limit is not the model's
+BLUR_RANGE = (0.25, 4.0)       # px: the edge spread the fit may settle on
+INNER = 0.2                    # of the ball's apparent radius: how deep inside the annulus goes
+MIN_PIXELS = 60
+MAX_STEP_PX = 1.0              # outline displacement a Gauss-Newton step may make
+SCALE_FLOOR = 1.0              # grey levels: the least residual scale the weights assume
+N_LEVELS = 8                   # per bin: b0, b1, a0, a1 and their slopes along the bin
+
+
+def _sqrt_edge_table(step=0.002, top=10.0):
+    """Tabulate g(tau) = E[sqrt((tau + Z)^+)] and g'(tau), Z ~ N(0, 1), on [-8, top]."""
+    tau = np.arange(-8.0, top + step / 2, step)
+    # int_0^inf x^nu phi(tau - x) dx = Gamma(nu + 1) exp(-tau^2 / 4) D_{-nu-1}(-tau) / sqrt(2 pi)
+    D, Dp = pbdv(-1.5, -tau)
+    scale = gamma_function(1.5) / np.sqrt(2 * np.pi) * np.exp(-tau * tau / 4)
+    return tau[0], step, scale * D, scale * (-0.5 * tau * D - Dp)
+
+
+_TAU0, _STEP, _G, _DG = _sqrt_edge_table()
+
+
+def sqrt_edge(tau):
+    """Return g(tau) and g'(tau): sqrt(x) H(x) blurred by N(0, 1), at tau (any shape)."""
+    tau = np.asarray(tau, dtype=float)
+    q = np.clip((tau - _TAU0) / _STEP, 0.0, len(_G) - 1.000001)
+    i = q.astype(np.intp)
+    f = q - i
+    g = _G[i] + f * (_G[i + 1] - _G[i])
+    dg = _DG[i] + f * (_DG[i + 1] - _DG[i])
+    far = tau > _TAU0 + _STEP * (len(_G) - 1)
+    if np.any(far):
+        x = tau[far]
+        g[far] = np.sqrt(x) * (1 - 1 / (8 * x * x) - 15 / (128 * x ** 4))
+        dg[far] = 0.5 / np.sqrt(x) * (1 + 3 / (8 * x * x) + 105 / (128 * x ** 4))
+    return g, dg
+
+
+def camera_key(camera):
+    return (camera.K.tobytes(), camera.D.tobytes(), camera.width, camera.height)
+
+
+@functools.lru_cache(maxsize=4)
+def _ideal_maps(key):
+    """
+    Return each image pixel's ideal (undistorted) position and the undistortion's stretch.
+
+    (height, width, 2) ideal pixels and (height, width, 2, 2) d(ideal) / d(image) for the camera
+    of ``key`` (camera_key); None for the stretch when the camera has no distortion.
+    """
+    from robotenis_vision.camera import Camera
+    K, D = np.frombuffer(key[0]).reshape(3, 3), np.frombuffer(key[1])
+    camera = Camera(K, D, key[2], key[3])
+    v, u = np.mgrid[0:camera.height, 0:camera.width].astype(float)
+    uv = np.stack([u, v], axis=-1)
+    if not np.any(D):
+        return uv, None
+    ideal = camera.undistort_pixels(uv)
+    if not np.all(np.isfinite(ideal)):
+        raise DetectionError('camera: its distortion cannot be inverted over the whole image')
+    d_dv, d_du = np.gradient(ideal, axis=(0, 1))
+    return ideal, np.stack([d_du, d_dv], axis=-1)
+
+
+@dataclass
+class Annulus:
+    """The pixels a fit uses, fixed while it iterates, sorted by bin."""
+
+    values: np.ndarray       # (n,) grey levels
+    ideal: np.ndarray        # (n, 2) ideal pixel positions
+    stretch: np.ndarray      # (n, 2, 2) d(ideal) / d(image), or None (no distortion)
+    bins: np.ndarray         # (n,) bin of each pixel
+    gather: np.ndarray       # (n_bins, m) the bins' pixels, padded with -1
+    angle: np.ndarray        # (n,) direction of the outline's normal at the pixel, rad
+    bin_angle: np.ndarray    # (n_bins,) direction at each bin's centre, rad
+    along: np.ndarray        # (n,) position along its bin's arc, -1 to 1
+    right: np.ndarray        # (n,) the pixel to the right, -1 if not in the annulus
+    usable: np.ndarray       # (n,) not saturated
+
+
+def outline_conic(camera, c, R):
+    """Return the sphere's outline as a conic in ideal pixels (3x3, positive inside)."""
+    c = np.asarray(c, dtype=float)
+    Kinv = np.linalg.inv(camera.K)
+    return Kinv.T @ (np.outer(c, c) - (c @ c - R * R) * np.eye(3)) @ Kinv
+
+
+def _ellipse(Qpx):
+    """Return the centre and shape M ((u - u0)^T M (u - u0) = 1 on the outline) of the conic."""
+    A, b, F = Qpx[:2, :2], Qpx[:2, 2], Qpx[2, 2]
+    centre = -np.linalg.solve(A, b)
+    M = A / -(F + b @ centre)
+    if np.any(np.linalg.eigvalsh(M) <= 0):
+        raise DetectionError('the sphere is too far off the optical axis to be measured '
+                             '(outline not an ellipse)')
+    return centre, M
+
+
+def annulus(img, camera, c, R, outer, inner):
+    """
+    Cut the pixels from ``outer`` px outside sphere c's outline to ``inner`` px inside it.
+
+    DetectionError when the annulus leaves the image (the sphere touches its border) or holds too
+    few pixels.
+    """
+    centre, M = _ellipse(outline_conic(camera, c, R))
+    values, V = np.linalg.eigh(M)
+    axes = 1 / np.sqrt(values)
+    ideal_map, stretch_map = _ideal_maps(camera_key(camera))
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    outline = centre + (np.stack([np.cos(t), np.sin(t)], 1) * axes) @ V.T
+    image_outline = camera.distort_pixels(outline)
+    lo = np.floor(image_outline.min(axis=0) - outer - 2).astype(int)
+    hi = np.ceil(image_outline.max(axis=0) + outer + 2).astype(int)
+    if lo[0] < 0 or lo[1] < 0 or hi[0] >= camera.width or hi[1] >= camera.height:
+        raise DetectionError('the sphere touches the image border')
+    ideal = ideal_map[lo[1]:hi[1] + 1, lo[0]:hi[0] + 1].reshape(-1, 2)
+    d = ideal - centre
+    rho = np.sqrt(np.einsum('ni,ij,nj->n', d, M, d))
+    # distance from the outline along the ray from the centre, with slack for the normal's slant
+    slack = 1 + 0.1 * (axes.max() / axes.min() - 1)
+    dist = (1 - rho) * np.linalg.norm(d, axis=1) / np.maximum(rho, 1e-9)
+    keep = (dist < inner * slack + 0.5) & (dist > -outer * slack - 0.5)
+    width = hi[0] - lo[0] + 1
+    index = np.flatnonzero(keep)
+    if len(index) < MIN_PIXELS:
+        raise DetectionError(f'only {len(index)} pixels around the outline')
+    vv, uu = np.divmod(index, width)
+    vals = np.asarray(img, dtype=float)[vv + lo[1], uu + lo[0]]
+    normal = d[index] @ M
+    angle = np.arctan2(normal[:, 1], normal[:, 0])
+    perimeter = np.pi * (3 * axes.sum() - np.sqrt((3 * axes[0] + axes[1])
+                                                  * (axes[0] + 3 * axes[1])))
+    n_bins = int(np.clip(np.round(perimeter / BIN_ARC_PX), MIN_BINS, MAX_BINS))
+    position = (angle + np.pi) / (2 * np.pi) * n_bins
+    bins = np.minimum(position.astype(int), n_bins - 1)
+    along = 2 * (position - bins) - 1
+    order = np.argsort(bins, kind='stable')
+    index, bins, angle, vals, along = (index[order], bins[order], angle[order], vals[order],
+                                       along[order])
+    present, starts, counts = np.unique(bins, return_index=True, return_counts=True)
+    bins = np.searchsorted(present, bins)
+    slot = np.arange(len(index)) - starts[bins]
+    gather = np.full((len(present), counts.max()), -1)
+    gather[bins, slot] = np.arange(len(index))
+    position = np.full(keep.size, -1)
+    position[index] = np.arange(len(index))
+    nxt = index + 1
+    right = np.where(nxt % width != 0, position[np.minimum(nxt, keep.size - 1)], -1)
+    stretch = (None if stretch_map is None
+               else stretch_map[lo[1]:hi[1] + 1, lo[0]:hi[0] + 1].reshape(-1, 2, 2)[index])
+    usable = (vals > SATURATED[0]) & (vals < SATURATED[1])
+    bin_angle = (present + 0.5) / n_bins * 2 * np.pi - np.pi
+    return Annulus(vals, ideal[index], stretch, bins, gather, angle, bin_angle, along, right,
+                   usable)
+
+
+@dataclass
+class Geometry:
+    """Where each annulus pixel is with respect to the outline of sphere c."""
+
+    d: np.ndarray            # (n,) signed distance to the outline, image px, positive inside
+    dd_dc: np.ndarray        # (n, 3) its derivative in c, px / m
+    kappa: np.ndarray        # (n,) the outline's curvature at the foot point, 1 / image px
+    w2_slope: np.ndarray     # (n,) d cos^2(i) / dt at the outline, 1 / image px
+    cos_deep: np.ndarray     # (n,) cos(i) - sqrt(w2' t) inside, 0 outside
+    sin_deep: np.ndarray     # (n,) sin(i) - 1 + w2' t / 2 inside, 0 outside
+
+
+def geometry(ann, camera, c, R):
+    """Compute each pixel's distance to sphere c's outline, its derivative, curvature, shading."""
+    c = np.asarray(c, dtype=float)
+    Kinv = np.linalg.inv(camera.K)
+    Qpx = outline_conic(camera, c, R)
+    A, b, F = Qpx[:2, :2], Qpx[:2, 2], Qpx[2, 2]
+    u = ann.ideal.copy()
+    for _ in range(2):                                  # Sampson steps onto the conic
+        g = 2 * (u @ A + b)
+        q = np.einsum('ni,ij,nj->n', u, A, u) + 2 * u @ b + F
+        u -= (q / np.einsum('ni,ni->n', g, g))[:, None] * g
+    g = 2 * (u @ A + b)
+    gn = np.sqrt(np.einsum('ni,ni->n', g, g))
+    n = g / gn[:, None]                                 # inward unit normal at the foot point
+    d = np.einsum('ni,ni->n', ann.ideal - u, n)
+    tangent = np.stack([-n[:, 1], n[:, 0]], axis=1)     # curvature of q = 0 (Hessian 2A)
+    kappa = np.abs(2 * np.einsum('ni,ij,nj->n', tangent, A, tangent) / gn)
+    r = np.column_stack([u, np.ones(len(u))]) @ Kinv.T  # rays of the foot points
+    rr = np.einsum('ni,ni->n', r, r)
+    dd_dc = (2 * (r @ c)[:, None] * r - 2 * rr[:, None] * c) / gn[:, None]
+    w2_slope = gn / (R * R * rr)
+    rp = np.column_stack([ann.ideal, np.ones(len(u))]) @ Kinv.T   # the pixels' own rays
+    rpc = rp @ c
+    w2 = (rpc * rpc / np.einsum('ni,ni->n', rp, rp) - (c @ c - R * R)) / (R * R)
+    if ann.stretch is not None:
+        # ideal-pixel distances to image pixels: d_image = d_ideal / |(d ideal / d image)^T n|
+        scale = 1 / np.linalg.norm(np.einsum('nji,nj->ni', ann.stretch, n), axis=1)
+        d, dd_dc = d * scale, dd_dc * scale[:, None]
+        kappa, w2_slope = kappa / scale, w2_slope / scale
+    inside = d > 0
+    depth = np.maximum(d, 0.0)
+    cos_deep = np.where(inside, np.sqrt(np.clip(w2, 0, 1)) - np.sqrt(w2_slope * depth), 0.0)
+    sin_deep = np.where(inside, np.sqrt(np.clip(1 - w2, 0, 1)) - 1 + 0.5 * w2_slope * depth,
+                        0.0)
+    return Geometry(d, dd_dc, kappa, w2_slope, cos_deep, sin_deep)
+
+
+def columns(geo, ann, s):
+    """
+    Return the model's columns at blur s and their derivatives in t and s.
+
+    X (n, 8): the bins' levels' (b0, b1, a0, a1, then each times the position along the bin);
+    H (n, 3): the limb's square-root term's (beta0, beta1 cos(phi), beta2 sin(phi)); dX_dt,
+    dX_ds, dH_dt, dH_ds the same shapes.
+    """
+    t = geo.d - 0.5 * s * s * geo.kappa
+    tau = t / s
+    Phi = ndtr(tau)
+    phi = np.exp(-0.5 * tau * tau) / np.sqrt(2 * np.pi)
+    k = -0.5 * geo.w2_slope
+    ramp = s * (tau * Phi + phi)
+    X = np.stack([1 - Phi, s * (phi - tau * (1 - Phi)), Phi, k * ramp + geo.sin_deep], axis=1)
+    dX_dt = np.stack([-phi / s, -(1 - Phi), phi / s, k * Phi], axis=1)
+    dX_ds = np.stack([phi * tau / s, phi, -phi * tau / s, k * phi], axis=1)
+    g, dg = sqrt_edge(tau)
+    root = np.sqrt(geo.w2_slope)
+    h = root * np.sqrt(s) * g + geo.cos_deep
+    dh_dt = root * dg / np.sqrt(s)
+    dh_ds = root * (0.5 * g - tau * dg) / np.sqrt(s)
+    a = ann.along[:, None]
+    X, dX_dt, dX_ds = (np.hstack([m, m * a]) for m in (X, dX_dt, dX_ds))
+    fourier = np.stack([np.ones(len(t)), np.cos(ann.angle), np.sin(ann.angle)], axis=1)
+    shift = -s * geo.kappa[:, None]          # the curvature shift moves with s: dt/ds = -s kappa
+    return (X, fourier * h[:, None], dX_dt, dX_ds + dX_dt * shift, fourier * dh_dt[:, None],
+            fourier * (dh_ds[:, None] + dh_dt[:, None] * shift))
+
+
+def _solve(X, G, y, w, ann):
+    """
+    Solve the weighted least squares in the bins' levels and the global parameters.
+
+    min sum w (y - X l_bin - G p)^2, X (n, 8) each pixel's own bin's columns, G (n, k) the global
+    ones. Every bin's normal equations come from one batched product of its (padded) pixels; its
+    levels are eliminated (Schur complement). Returns p, the levels (n_bins, 8) and the inverse of
+    the Schur complement (k, k). A global column that vanishes gets no step.
+    """
+    m = X.shape[1]
+    Z = np.hstack([X, G, y[:, None]]) * np.sqrt(w)[:, None]
+    Zp = np.concatenate([Z, np.zeros((1, Z.shape[1]))])[ann.gather]     # (B, P, m + k + 1)
+    M = np.matmul(Zp.transpose(0, 2, 1), Zp)
+    Nbb, Nbg, vb = M[:, :m, :m], M[:, :m, m:-1], M[:, :m, -1]
+    Nbb = Nbb + (1e-6 * np.trace(Nbb, axis1=1, axis2=2) / m + 1e-12)[:, None, None] * np.eye(m)
+    inv = np.linalg.inv(Nbb)
+    T = np.matmul(inv, Nbg)
+    raw = M[:, m:-1, m:-1].sum(axis=0)
+    S = raw - np.einsum('bik,bil->kl', Nbg, T)
+    rhs = M[:, m:-1, -1].sum(axis=0) - np.einsum('bik,bi->k', T, vb)
+    diag = np.diag(S)
+    # a column is dead when the bins' levels explain it all, or it is zero (each on its own scale)
+    live = (diag > 1e-9 * np.diag(raw)) & (np.diag(raw) > 0)
+    d = np.sqrt(diag[live])
+    S_inv = np.zeros_like(S)
+    S_inv[np.ix_(live, live)] = np.linalg.pinv(
+        S[np.ix_(live, live)] / np.outer(d, d), rcond=1e-12, hermitian=True) / np.outer(d, d)
+    p = S_inv @ rhs
+    levels = np.einsum('bij,bj->bi', inv, vb) - np.einsum('bik,k->bi', T, p)
+    return p, levels, S_inv
+
+
+@dataclass
+class ModelFit:
+    c: np.ndarray                  # (3,) sphere centre, optical frame, m
+    cov: np.ndarray                # (3, 3) its covariance, m^2
+    blur: float                    # px: the edge spread fitted (lens and pixel)
+    noise: float                   # grey levels (linearised): the pixel noise estimated
+    beta: np.ndarray               # (3,) the limb's square-root shading coefficients
+    levels: np.ndarray             # (n_bins, 8) per bin
+    weights: np.ndarray            # (n,) weight of each annulus pixel
+    residuals: np.ndarray          # (n,) grey levels (linearised)
+    iterations: int
+    annulus: Annulus = field(repr=False)
+    prior_weights: np.ndarray = field(default=None, repr=False)   # (n,) before robust weights
+
+    def edge_bins(self, min_step=8.0):
+        """
+        Return which bins show the ball's edge: a step from background to limb out of the noise.
+
+        The step is a0 - b0; a bin's needs min_step grey levels and four times its standard error
+        (about noise sqrt(12 / n) for n pixels with weight).
+        """
+        step = self.levels[:, 2] - self.levels[:, 0]
+        n = np.bincount(self.annulus.bins, self.weights > 0, minlength=len(step))
+        error = self.noise * np.sqrt(12 / np.maximum(n, 1))
+        return (np.abs(step) > np.maximum(min_step, 4 * error)) & (n >= 8)
+
+    def coverage(self, min_step=8.0):
+        """Return how much of the outline (rad) its edge bins cover: 2 pi less the widest gap."""
+        a = np.sort(self.annulus.bin_angle[self.edge_bins(min_step)])
+        if len(a) < 2:
+            return 0.0
+        gaps = np.diff(np.concatenate([a, a[:1] + 2 * np.pi]))
+        return float(2 * np.pi - gaps.max() + 2 * np.pi / len(self.annulus.bin_angle))
+
+    def polarity_flips(self, min_step=8.0):
+        """Return how often the step's sign changes around the outline, over its edge bins."""
+        edge = self.edge_bins(min_step)
+        step = (self.levels[:, 2] - self.levels[:, 0])[edge]
+        if len(step) < 2:
+            return 0
+        sign = np.sign(step)
+        return int(np.sum(sign != np.roll(sign, 1)))
+
+    @property
+    def kept(self):
+        """Return the fraction of the pixels' weight the robust weights leave: 1 for all of it."""
+        return float(self.weights.sum() / max(self.prior_weights.sum(), 1e-300))
+
+    @property
+    def rms(self):
+        """Return the weighted RMS residual over the noise (1 for a model that fits; floored)."""
+        w = self.weights > 0
+        return float(np.sqrt(np.average(self.residuals[w] ** 2, weights=self.weights[w]))
+                     / max(self.noise, SCALE_FLOOR))
+
+
+def _noise(r, ann, ok):
+    """Return the white pixel noise: robust spread of differences of neighbouring residuals."""
+    j = ann.right
+    pair = (j >= 0)
+    pair[pair] &= ok[pair] & ok[j[pair]]
+    if pair.sum() < 20:
+        return float(1.4826 * np.median(np.abs(r[ok]))) if ok.any() else 1.0
+    return float(1.4826 * np.median(np.abs(r[pair] - r[j[pair]])) / np.sqrt(2))
+
+
+def _weights(r, w0, ann, scale, noise):
+    """Return Tukey's biweight of the residuals times the bins' weight (what the model follows)."""
+    u = r / (TUKEY * scale)
+    tukey = np.where((w0 > 0) & (np.abs(u) < 1), (1 - u * u) ** 2, 0.0)
+    ok = (w0 > 0).astype(float)
+    n = np.bincount(ann.bins, ok, minlength=len(ann.gather))
+    ms = np.bincount(ann.bins, ok * np.minimum(r * r, (TUKEY * scale) ** 2),
+                     minlength=len(ann.gather)) / np.maximum(n, 1)
+    excess = ms / (noise * noise)
+    per_bin = np.minimum(1.0, (1 + BIN_EXCESS) / np.maximum(excess + BIN_EXCESS, 1e-9))
+    return w0 * tukey * per_bin[ann.bins]
+
+
+def linearise(values, gamma):
+    """
+    Return linear intensities and each one's noise weight for a response grey = 255 (I/255)^(1/g).
+
+    The sensor's noise is added after the response: a grey level's noise becomes
+    gamma (grey / 255)^(gamma - 1) times it in linear units (weight: its inverse square).
+    """
+    if gamma == 1.0:
+        return values.astype(float), np.ones(len(values))
+    g = np.maximum(values, 1.0) / 255.0
+    return 255.0 * g ** gamma, g ** (2 - 2 * gamma)
+
+
+def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=True):
+    """
+    Fit the sphere of radius R to the image from a start c0 (m) whose outline is a pixel or so off.
+
+    ``blur0``: the first guess of the edge spread (px); ``gamma``: the camera's response
+    (grey = 255 (I / 255)^(1 / gamma), 1 for a linear camera). Stops when the step in c is below
+    ``tol`` of its standard deviation. ``limb``: fit the limb's square-root shading (without it,
+    a coarse first fit that only pulls the outline into place). A step moves the outline by at
+    most MAX_STEP_PX and the blur by a third. DetectionError when the fit cannot be made.
+    """
+    c = np.asarray(c0, dtype=float).copy()
+    s = float(np.clip(blur0, *BLUR_RANGE))
+    r_px = camera.fx * R / np.sqrt(max(c @ c - R * R, 1e-12))
+    outer = min(float(np.clip(3 * s + 2.0, 3.5, 6.0)), max(2.5, 0.3 * r_px))
+    ann = annulus(img, camera, c, R, outer, max(2.5, INNER * r_px))
+    y, w0 = linearise(ann.values, gamma)
+    w0 = w0 * ann.usable
+    geo = geometry(ann, camera, c, R)
+    X, H = columns(geo, ann, s)[:2]
+    H = H if limb else H[:, :0]
+    beta, levels, _ = _solve(X, H, y, w0, ann)
+    scale = noise = None
+    for it in range(1, iterations + 1):
+        X, H, dX_dt, dX_ds, dH_dt, dH_ds = columns(geo, ann, s)
+        if not limb:
+            H, dH_dt, dH_ds = H[:, :0], dH_dt[:, :0], dH_ds[:, :0]
+        lv = levels[ann.bins]
+        r = (y - np.einsum('ni,ni->n', X, lv) - H @ beta) * np.sqrt(w0)
+        if it <= 3:
+            # floored: on an image without noise the model's own small misfit must not count as
+            # outliers (a grey level: 8-bit rounding and a few tenths of a percent of a step)
+            scale = max(1.4826 * np.median(np.abs(r[w0 > 0])), SCALE_FLOOR)
+            noise = max(_noise(r, ann, w0 > 0), SCALE_FLOOR)
+        if it == 2:
+            # the ball, the background and the edge need not be equally noisy (a sensor's noise
+            # grows with the signal; a renderer's sampling of the lens and the pixel with the
+            # edge): each zone weighted by its own, the edge's (within 1.5 blurs) from its
+            # residuals' spread, the others' from neighbouring differences
+            edge = np.abs(geo.d) < 1.5 * s
+            inside = (geo.d > 0) & ~edge
+            zone = np.where(edge, 0, np.where(inside, 1, 2))
+            levels_ = [max(1.4826 * np.median(np.abs(r[(w0 > 0) & edge])), SCALE_FLOOR)
+                       if np.sum((w0 > 0) & edge) > 20 else noise,
+                       max(_noise(r, ann, (w0 > 0) & inside), SCALE_FLOOR),
+                       max(_noise(r, ann, (w0 > 0) & (geo.d <= 0) & ~edge), SCALE_FLOOR)]
+            factor = np.maximum(np.array(levels_)[zone] / noise, 1e-3)
+            w0, r = w0 / factor ** 2, r / factor
+        w = _weights(r, w0, ann, scale, noise)
+        dy_dt = np.einsum('ni,ni->n', dX_dt, lv) + dH_dt @ beta
+        dy_ds = np.einsum('ni,ni->n', dX_ds, lv) + dH_ds @ beta
+        # linearised in c and s about the current values; levels and beta solved afresh
+        G = np.column_stack([dy_dt[:, None] * geo.dd_dc, dy_ds, H])
+        p, levels, S_inv = _solve(X, G, y, w, ann)
+        dc, ds, beta = p[:3], p[3], p[4:]
+        # at most MAX_STEP_PX of outline a step (the outline moves by about the image of dc)
+        dc *= min(1.0, MAX_STEP_PX / max(np.max(np.abs(geo.dd_dc @ dc)), 1e-12))
+        c = c + dc
+        s = float(np.clip(s + np.clip(ds, -s / 3, s / 3), *BLUR_RANGE))
+        geo = geometry(ann, camera, c, R)
+        sd = np.sqrt(np.maximum(np.diag(S_inv)[:3], 1e-30)) * noise
+        if np.all(np.abs(dc) < tol * sd) and abs(ds) < 1e-3 and it >= 2:
+            break
+    if not np.all(np.isfinite(c)) or c[2] <= R:
+        raise DetectionError('the model fit did not converge')
+    # the outline must have stayed within the annulus it was fitted on
+    moved = np.linalg.norm(camera.project(c) - camera.project(c0))
+    grown = abs(camera.fx * R / np.sqrt(c @ c - R * R) - r_px)
+    if moved > outer or grown > outer:
+        raise DetectionError(f'the outline is not where the fit started ({moved:.1f} px off, '
+                             f'radius {grown:.1f} px off)')
+    X, H = columns(geo, ann, s)[:2]
+    H = H if limb else H[:, :0]
+    r = (y - np.einsum('ni,ni->n', X, levels[ann.bins]) - H @ beta) * np.sqrt(w0)
+    noise = _noise(r, ann, w > 0)
+    return ModelFit(c, noise * noise * S_inv[:3, :3], s, noise, beta, levels, w, r, it, ann, w0)

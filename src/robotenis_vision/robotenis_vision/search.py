@@ -1,0 +1,259 @@
+"""
+Where the balls are in an image, without a prior: radial-symmetry votes on a shrunk image.
+
+The image is shrunk ``FACTOR`` times (area average: a checkerboard of squares under FACTOR px turns
+grey); each pixel whose gradient stands out of the image's noise votes for the centres one radius
+away along its gradient, on both sides (the ball's outline may be brighter or darker than its
+background, and change along it), for every radius of the working range. The votes of a disc's
+outline all meet at its centre at its radius; a straight edge's spread along a line, a square's
+over a cross, texture's over everything. Peaks of the votes, normalised by the circumference, are
+the candidates: centre and radius to about a shrunk pixel. A candidate inside a bigger one (the
+highlight, the terminator on the ball) is dropped.
+"""
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from robotenis_vision import conic, edges
+
+FACTOR = 4
+RADIUS_STEP = 1.15             # ratio between the radii voted for
+EDGE_SIGMAS = 4.0              # a vote needs a gradient this many noise sigmas strong
+MIN_SUPPORT = 0.15             # of the circumference must vote for a candidate
+MAX_EDGES = 12000              # strongest gradient pixels that vote
+MAX_CANDIDATES = 24
+PER_RADIUS = 3                 # candidates of one radius at most (a pattern's are alike)
+OUTER_SUPPORT = 0.4            # of a peak's support an outer ring at its centre needs
+
+
+@dataclass
+class Candidate:
+    centre: np.ndarray         # (2,) image pixels
+    radius: float              # px
+    support: float             # fraction of the circumference whose gradients point at it
+    outer: float = 0.0         # px: the largest radius about as well supported (an outer ring)
+
+
+def _edges(small):
+    """Return the voting pixels: positions (n, 2), unit gradients (n, 2), of a shrunk image."""
+    gx = cv2.Sobel(small, cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(small, cv2.CV_32F, 0, 1, ksize=3)
+    mag = cv2.magnitude(gx, gy)
+    # the noise of the gradient: from the image's finest differences, robust to edges
+    fine = np.abs(np.diff(small, axis=1)).ravel()
+    noise = 1.4826 * np.median(fine) / np.sqrt(2) + 1e-3
+    # a 3x3 Sobel of white noise sigma has a magnitude of about 4.4 sigma
+    threshold = max(EDGE_SIGMAS * 4.4 * noise, 4.0)
+    ys, xs = np.nonzero(mag > threshold)
+    m = mag[ys, xs]
+    if len(m) > MAX_EDGES:          # a texture: every other one (strength would favour it)
+        keep = np.linspace(0, len(m) - 1, MAX_EDGES).astype(int)
+        ys, xs, m = ys[keep], xs[keep], m[keep]
+    g = np.stack([gx[ys, xs], gy[ys, xs]], axis=1) / m[:, None]
+    return np.stack([xs, ys], axis=1).astype(np.float32), g
+
+
+def candidates(image, r_min, r_max, factor=FACTOR):
+    """
+    Return the ball candidates of an image (float32), strongest first.
+
+    ``r_min``, ``r_max``: the radii (px) a ball in the working range can have.
+    """
+    h, w = image.shape
+    small = cv2.resize(np.asarray(image, dtype=np.float32), (w // factor, h // factor),
+                       interpolation=cv2.INTER_AREA)
+    sh, sw = small.shape
+    radii = np.exp(np.arange(np.log(max(r_min / factor, 2.5)),
+                             np.log(r_max / factor) + 1e-9, np.log(RADIUS_STEP)))
+    pos, g = _edges(small)
+    if len(pos) < 8:
+        return []
+    # votes: every edge pixel, every radius, both directions along its gradient
+    offsets = (radii[None, :, None, None] * np.array([1.0, -1.0])[None, None, :, None]
+               * g[:, None, None, :])                                 # (n, R, 2, 2)
+    centres = np.rint(pos[:, None, None, :] + offsets).astype(np.int32)
+    r_index = np.broadcast_to(np.arange(len(radii))[None, :, None], centres.shape[:3])
+    ok = ((centres[..., 0] >= 0) & (centres[..., 0] < sw)
+          & (centres[..., 1] >= 0) & (centres[..., 1] < sh))
+    flat = (r_index[ok] * sh + centres[..., 1][ok]) * sw + centres[..., 0][ok]
+    votes = np.bincount(flat, minlength=len(radii) * sh * sw).reshape(len(radii), sh, sw)
+    votes = votes.astype(np.float32)
+    support = np.empty_like(votes)
+    for k in range(len(radii)):
+        # a vote lands within a shrunk pixel of the centre; texture votes everywhere: the local
+        # mean (over 9 x 9) is taken off
+        near = cv2.blur(votes[k], (3, 3)) * 9
+        support[k] = near - cv2.blur(votes[k], (9, 9)) * 9
+    # an outline gives about 2 pi r votes per shrunk pixel across it, and the 3x3 Sobel makes
+    # about 2 pixels across it vote
+    support /= 2 * np.pi * radii[:, None, None] * 2.0
+    peak = support == cv2.dilate(support.max(axis=0), np.ones((3, 3), np.uint8))[None]
+    k, ys, xs = np.nonzero(peak & (support >= MIN_SUPPORT))
+    order = np.argsort(-support[k, ys, xs])
+    # a pattern repeats (a checkerboard's squares all vote alike at one radius), a ball does not:
+    # at most PER_RADIUS candidates of each radius voted for
+    rank = np.empty(len(order), int)
+    for j in np.unique(k):
+        at = order[k[order] == j]
+        rank[at] = np.arange(len(at))
+    order = order[rank[order] < PER_RADIUS][:MAX_CANDIDATES]
+    found = []
+    for i in order:
+        centre = (np.array([xs[i], ys[i]], dtype=float) + 0.5) * factor - 0.5
+        r = radii[k[i]] * factor
+        if any(np.linalg.norm(centre - c.centre) < max(c.outer, r) for c in found):
+            continue                              # inside (or around) a stronger candidate
+        # a shaded ball's terminator can vote at its centre too: the outline may be the outer ring
+        box = support[:, max(ys[i] - 1, 0):ys[i] + 2, max(xs[i] - 1, 0):xs[i] + 2]
+        here = box.max(axis=(1, 2))
+        rings = np.flatnonzero(here >= OUTER_SUPPORT * support[k[i], ys[i], xs[i]])
+        found.append(Candidate(centre, float(r), float(support[k[i], ys[i], xs[i]]),
+                               float(max(radii[rings.max()] * factor, r))))
+    return found
+
+
+@dataclass
+class Sphere:
+    """A candidate confirmed by its outline: the sphere whose outline most rays agree on."""
+
+    c: np.ndarray              # (3,) optical frame, m
+    score: float               # fraction of the rays with an outline point on its outline
+    points: np.ndarray         # (k, 2) those points, ideal pixels
+    candidate: Candidate
+    roughness: float = 0.0     # the interior's median |Laplacian| over a smooth image's
+
+
+RAY_SPACING_PX = 3.0
+PEAKS_PER_RAY = 3
+INLIER_PX = 1.0
+TRIALS = 160
+SHARPNESS = 0.25               # 1/px: steepest slope over step of a sharp edge
+MIN_STEP = 8.0                 # grey levels
+
+
+def _ray_peaks(image, camera, centre_ideal, radius, outer):
+    """
+    Return up to PEAKS_PER_RAY sharp steps per ray from a candidate's centre, ideal pixels.
+
+    The rays span 0.6 of the candidate's radius to 1.3 of its outer ring's.
+    Points (rays, PEAKS_PER_RAY, 2) and their strengths (|slope|, 0 where a ray has fewer). A
+    step counts when it is sharp: its steepest slope is at least SHARPNESS times the step across
+    it (the difference of the means 1.5-4.5 px on either side), as a lens-blurred outline is and
+    a smooth texture, further away and out of focus, is not; and when that step stands out of the
+    noise.
+    """
+    lo, hi = 0.6 * radius, 1.3 * max(outer, radius)
+    radius, half = 0.5 * (lo + hi), max(6.0, 0.5 * (hi - lo)) + 5.0
+    n = int(np.clip(2 * np.pi * radius / RAY_SPACING_PX, 24, 120))
+    phi = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    normals = np.stack([np.cos(phi), np.sin(phi)], axis=1)
+    s = np.arange(-half, half + edges.STEP / 2, edges.STEP)
+    profiles, inside = edges.sample_profiles(image, centre_ideal + radius * normals, normals, s,
+                                             camera.distort_pixels)
+    d = np.diff(profiles, axis=1) / edges.STEP
+    a = np.abs(d)
+    pad = np.pad(a, ((0, 0), (1, 1)), constant_values=-1.0)
+    peak = (a >= pad[:, :-2]) & (a > pad[:, 2:])
+    noise = 1.4826 * np.median(np.abs(np.diff(profiles[:, ::2], axis=1))) / np.sqrt(2) + 1e-6
+    # the step across each sample: means over 1.5-4.5 px beyond it on either side
+    c = np.cumsum(np.pad(profiles, ((0, 0), (1, 0))), axis=1)
+    k0, k1 = int(round(1.5 / edges.STEP)), int(round(4.5 / edges.STEP))
+    j = np.arange(a.shape[1])
+    lo_a, lo_b = np.clip(j - k1, 0, None), np.clip(j - k0, 0, None)
+    hi_a, hi_b = np.clip(j + 1 + k0, None, profiles.shape[1]), np.clip(j + 1 + k1, None,
+                                                                       profiles.shape[1])
+    before = (c[:, lo_b + 1] - c[:, lo_a]) / np.maximum(lo_b + 1 - lo_a, 1)
+    after = (c[:, hi_b] - c[:, hi_a]) / np.maximum(hi_b - hi_a, 1)
+    step = np.abs(after - before)
+    usable = (peak & (a >= SHARPNESS * step) & (step > max(MIN_STEP, 6 * noise))
+              & (j >= k1) & (j < a.shape[1] - k1))
+    strength = np.where(usable, a, 0.0)
+    strength[~inside] = 0.0
+    top = np.argsort(-strength, axis=1)[:, :PEAKS_PER_RAY]
+    rows = np.arange(n)[:, None]
+    value = strength[rows, top]
+    k = np.clip(top, 1, a.shape[1] - 2)
+    y0, y1, y2 = a[rows, k - 1], a[rows, k], a[rows, k + 1]
+    den = y0 - 2 * y1 + y2
+    offset = k + np.clip(np.where(den < 0, 0.5 * (y0 - y2) / np.where(den < 0, den, -1.0), 0.0),
+                         -0.5, 0.5)
+    along = radius + s[0] + (offset + 0.5) * edges.STEP
+    points = centre_ideal + along[..., None] * normals[:, None, :]
+    return points, value
+
+
+def confirm(image, camera, R, candidate, rng=None):
+    """
+    Find the sphere whose outline the steep points of most rays from a candidate agree on.
+
+    Each ray offers its few steepest points (the ball's outline, a background edge, a highlight);
+    triples of rays, one point each (the stronger the likelier), give spheres of radius R
+    (conic.sphere_from_three_rays), and the one most rays agree with within INLIER_PX is refitted
+    on those points (Taubin, closed form). None when no sphere is found.
+    """
+    rng = np.random.default_rng(0) if rng is None else rng
+    centre = camera.undistort_pixels(candidate.centre)
+    points, value = _ray_peaks(image, camera, centre, candidate.radius, candidate.outer)
+    ok = value.sum(axis=1) > 0
+    points, value = points[ok], value[ok]
+    if len(points) < 12:
+        return None
+    n = len(points)
+    prob = value / value.sum(axis=1, keepdims=True)
+    rays = np.argpartition(rng.random((TRIALS, n)), 3, axis=1)[:, :3]
+    pick = (rng.random((TRIALS, 3, 1)) > np.cumsum(prob[rays], axis=2)).sum(axis=2)
+    pick = np.minimum(pick, PEAKS_PER_RAY - 1)
+    xy = camera.to_normalized(points[rays, pick])                       # (T, 3, 2)
+    C = conic.sphere_from_three_rays(xy[:, 0], xy[:, 1], xy[:, 2], R)
+    good = np.all(np.isfinite(C), axis=1) & (C[:, 2] > R)
+    if not np.any(good):
+        return None
+    C = C[good]
+    all_xy = camera.to_normalized(points.reshape(-1, 2))
+    dist = np.abs(camera.fx * conic.sampson(all_xy, C, R)).reshape(len(C), n, PEAKS_PER_RAY)
+    dist = np.where(value[None] > 0, dist, np.inf)
+    hits = (dist.min(axis=2) < INLIER_PX).sum(axis=1)
+    best = int(np.argmax(hits))
+    near = dist[best].argmin(axis=1)
+    inl = dist[best, np.arange(n), near] < INLIER_PX
+    if inl.sum() < 8:
+        return None
+    chosen = points[np.arange(n), near][inl]
+    try:
+        c = conic.sphere_from_conic(conic.taubin(camera.to_normalized(chosen)), R)
+    except conic.ConicError:
+        c = C[best]
+    return Sphere(c, float(inl.sum() / len(ok)), chosen, candidate,
+                  _roughness(image, camera, chosen))
+
+
+def _roughness(image, camera, outline):
+    """
+    Return how rough the image is inside an outline: median |Laplacian| over white noise's.
+
+    A ball's interior is smooth shading (about 1: the noise alone; a highlight is a small part of
+    it); a patch of checkerboard or fine texture is not. The noise is the image's own, from the
+    differences of horizontal neighbours (median: robust to edges).
+    """
+    uv = camera.distort_pixels(outline)
+    centre = uv.mean(axis=0)
+    inner = centre + 0.7 * (uv - centre)
+    lo = np.floor(inner.min(axis=0)).astype(int)
+    hi = np.ceil(inner.max(axis=0)).astype(int)
+    h, w = image.shape
+    lo, hi = np.maximum(lo, 1), np.minimum(hi, [w - 2, h - 2])
+    if np.any(hi - lo < 3):
+        return np.inf
+    patch = image[lo[1] - 1:hi[1] + 2, lo[0] - 1:hi[0] + 2]
+    lap = np.abs(4 * patch[1:-1, 1:-1] - patch[:-2, 1:-1] - patch[2:, 1:-1] - patch[1:-1, :-2]
+                 - patch[1:-1, 2:])
+    vv, uu = np.mgrid[lo[1]:hi[1] + 1, lo[0]:hi[0] + 1]
+    rel = np.stack([uu - centre[0], vv - centre[1]], axis=-1)
+    radius = np.median(np.linalg.norm(inner - centre, axis=1))
+    mask = np.linalg.norm(rel, axis=-1) < radius
+    if mask.sum() < 9:
+        return np.inf
+    noise = 1.4826 * np.median(np.abs(np.diff(image[::4, ::2], axis=1))) / np.sqrt(2) + 0.3
+    # 4-neighbour Laplacian of white noise sigma: std sqrt(20) sigma, median |.| 0.674 of it
+    return float(np.median(lap[mask]) / (0.674 * np.sqrt(20) * noise))
