@@ -10,6 +10,7 @@ import sys
 from rcl_interfaces.msg import ParameterDescriptor
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.qos import DurabilityPolicy, QoSProfile
 
 # A latched topic (the robot description): the last message reaches late subscribers too.
@@ -35,7 +36,8 @@ def spin(make_node, name, fatal=(ValueError,), args=None, finish=None):
     Run one node on a SingleThreadedExecutor until Ctrl-C or shutdown; return the exit code.
 
     ``fatal`` errors raised while building the node (a bad parameter, an unreadable file) are
-    printed as ``name: message`` and give exit code 2. Shutdown goes in the order rclpy needs:
+    printed as ``name: message`` and give exit code 2; a stop by signal gives 0, even when it
+    interrupts a callback. Shutdown goes in the order rclpy needs:
     executor, ``finish(node)`` (e.g. close a file the node writes), node, context.
     """
     rclpy.init(args=args)
@@ -47,6 +49,11 @@ def spin(make_node, name, fatal=(ValueError,), args=None, finish=None):
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except _rclpy.RCLError:
+        # a callback caught mid-publish by Ctrl-C or SIGTERM (the signal handler shut the context
+        # down under it) is a normal stop; a failure while the context is alive is not
+        if rclpy.ok():
+            raise
     except fatal as e:
         print(f'{name}: {e}', file=sys.stderr)
         return 2

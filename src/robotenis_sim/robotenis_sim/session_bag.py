@@ -93,6 +93,9 @@ class BagSpec:
     images_per_pose: int = 0
     compressed_images: bool = True
     storage: str = 'mcap'               # or 'sqlite3', rosbag2's other storage
+    targets: tuple = None               # commanded positions (m, base frame) instead of random
+    #                                     boundary poses: a planner's; those the camera cannot see
+    #                                     are skipped
 
 
 @dataclass
@@ -125,16 +128,23 @@ def plan(spec, batch=4000):
     declared = description.nominal()
     truth = sim_truth.with_effects(sim_truth.load(), **spec.effects)
     rng = np.random.default_rng(spec.seed)
-    P = np.empty((0, 3))
-    while len(P) < spec.poses:
-        candidates = workspace.boundary_poses(declared, batch, rng)
-        P_true = static_session.rest_positions(truth, declared, candidates)[1]
-        seen = static_session.visible(static_session.sphere_in_camera(truth, P_true),
-                                      truth.geometry.sphere_radius)
-        P = np.concatenate([P, candidates[seen]])
+    if spec.targets is not None:
+        P = _seen(truth, declared, np.asarray(spec.targets, dtype=float).reshape(-1, 3))
+    else:
+        P = np.empty((0, 3))
+        while len(P) < spec.poses:
+            P = np.concatenate([P, _seen(truth, declared,
+                                         workspace.boundary_poses(declared, batch, rng))])
     Theta, P_true = static_session.rest_positions(truth, declared, P[:spec.poses])
     return (declared, Theta,
             truth.camera_reading(static_session.sphere_in_camera(truth, P_true)), P_true)
+
+
+def _seen(truth, declared, candidates):
+    """Return the commanded positions at which the camera sees the whole ball."""
+    P_true = static_session.rest_positions(truth, declared, candidates)[1]
+    return candidates[static_session.visible(static_session.sphere_in_camera(truth, P_true),
+                                             truth.geometry.sphere_radius)]
 
 
 def schedule(Theta, spec):
