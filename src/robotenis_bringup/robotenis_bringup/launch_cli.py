@@ -8,7 +8,8 @@ the simulated robot, the detector, the controller and the calibration service). 
 a launch argument, as ``ros2 launch`` takes them; ``--show-args`` lists them. The options are
 shorthands: ``--truth F`` is truth_path:=F, ``--description F`` description_path:=F,
 ``--sim-time`` sim_time:=true. Node logs go to log/launch/. Exits 0 after Ctrl-C or SIGTERM
-with every node still running until then; non-zero, naming it, if a node died.
+when every node ran until then and exited cleanly; 1, naming each, if a node died or exited
+non-zero when stopped.
 """
 import argparse
 import os
@@ -70,9 +71,8 @@ def main(argv=None):
         print(f'robotenis launch: {e}', file=sys.stderr)
         return 2
     launcher.wait()
-    if launcher.dead:
-        died = ', '.join(f'{n} (exit code {c})' for n, c in launcher.dead)
-        print(f'robotenis launch: {died} died; the other nodes were stopped', file=sys.stderr)
+    if launcher.failures:
+        print(f'robotenis launch: {"; ".join(launcher.failures)}', file=sys.stderr)
         return 1
     return 0
 

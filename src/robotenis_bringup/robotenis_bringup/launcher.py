@@ -4,13 +4,22 @@ Start, watch and stop node processes, as ``ros2 launch`` does.
 Each node runs as its own process (its console script with ``--ros-args``) in its own process
 group and logs to ``<log_dir>/<node>.log``; when one dies the launcher says so with its exit code
 and the tail of its log, and Ctrl-C or SIGTERM stops all of them (SIGINT first, then SIGTERM, then
-SIGKILL).
+SIGKILL). ``failures`` names every node that did not end cleanly: one that died while the others
+ran, and one that did not stop cleanly on SIGINT (it exited non-zero: it crashed on shutdown, or
+needed SIGTERM or SIGKILL). Dying of the SIGINT itself (a node still starting up, before its
+handler is set) is a clean stop.
 """
 import os
 import signal
 import subprocess
 import sys
 import time
+
+CLEAN_STOP = (0, -signal.SIGINT)    # exit codes of a node that stopped on SIGINT
+
+
+def _default_sigint():
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 class Launcher:
@@ -22,8 +31,10 @@ class Launcher:
         self.out, self.env = out, env
         self.procs = {}
         self.dead = []              # (name, exit code) of the nodes that died, in order
+        self.unclean = []           # (name, exit code) of the nodes that exited non-zero on stop
 
     def say(self, text):
+        """Print one line of the launcher's own output."""
         print(f'[launch] {text}', file=self.out, flush=True)
 
     def start(self):
@@ -37,9 +48,11 @@ class Launcher:
                                         '(build the workspace)')
             log = open(os.path.join(self.log_dir, f'{node.name}.log'), 'w')
             # Own process group: a Ctrl-C in the terminal reaches the launcher only, which
-            # then stops the nodes in order.
+            # then stops the nodes in order. SIGINT back to its default: a launcher started in
+            # the background of a shell inherits it ignored, and Python then never installs its
+            # handler, so the node would only stop on SIGTERM.
             proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=self.env,
-                                    start_new_session=True)
+                                    start_new_session=True, preexec_fn=_default_sigint)
             self.procs[node.name] = (proc, log)
             self.say(f'started {node.name} (pid {proc.pid}), log {log.name}')
 
@@ -77,7 +90,15 @@ class Launcher:
         for name, (proc, log) in self.procs.items():
             log.close()
             self.say(f'stopped {name} (exit code {proc.poll()})')
+            if proc.poll() not in CLEAN_STOP:
+                self.unclean.append((name, proc.poll()))
         self.procs = {}
+
+    @property
+    def failures(self):
+        """Return the sentences naming each node that did not end cleanly (empty: all did)."""
+        return ([f'{name} died (exit code {code})' for name, code in self.dead]
+                + [f'{name} exited with code {code} when stopped' for name, code in self.unclean])
 
     def wait(self, stop_when_one_dies=False):
         """Watch the nodes until a signal (or, optionally, the first death), then stop them all."""
@@ -94,4 +115,5 @@ class Launcher:
         finally:
             for s, h in old.items():
                 signal.signal(s, h)
+            self.check()                # a node that died since the last look is a death too
             self.stop()

@@ -1,8 +1,11 @@
 """The launcher starts processes, reports one that dies, and stops the rest in order."""
 import io
 import os
+import re
 import signal
 import stat
+import subprocess
+import sys
 import time
 
 import pytest
@@ -85,3 +88,86 @@ def test_missing_node_is_named(prefix):
                         str(prefix / 'log'), io.StringIO())
     with pytest.raises(FileNotFoundError, match="node 'x'.*not installed"):
         launcher.start()
+
+
+SHUTDOWN_CRASHER = """#!/usr/bin/env python3
+import signal, sys, time
+signal.signal(signal.SIGINT, lambda *a: (print("crash on shutdown", flush=True), sys.exit(1)))
+print("running", flush=True)
+while True:
+    time.sleep(0.05)
+"""
+PLAIN_SLEEPER = """#!/usr/bin/env python3
+import time
+print("running", flush=True)
+while True:
+    time.sleep(0.05)
+"""
+# s: the fakes start at once and answer SIGINT at once; the launcher looks every 0.1 s and waits
+# at most 5 s per signal when stopping, so 10 s is only reached if it hangs.
+BOUND_S = 10.0
+
+
+def wait_for(path, text, deadline):
+    """Return the file's text once it holds ``text`` (AssertionError past the deadline)."""
+    while time.monotonic() < deadline:
+        content = path.read_text()
+        if text in content:
+            return content
+        time.sleep(0.05)
+    raise AssertionError(f'{text!r} not in {path}:\n{path.read_text()}')
+
+
+def run_launch(prefix, nodes, kill=None):
+    """
+    Run ``robotenis launch`` on a launch file of ``nodes`` ((name, exec) pairs), then Ctrl-C it.
+
+    ``kill``: the node killed by PID (SIGKILL) first. Returns (exit status, stderr); every process
+    started is gone when it returns, even on failure.
+    """
+    install(prefix / 'install', 'pkg', 'shutdown_crasher', SHUTDOWN_CRASHER)
+    install(prefix / 'install', 'pkg', 'plain_sleeper', PLAIN_SLEEPER)
+    launch = prefix / 'fake.launch.yaml'
+    launch.write_text('launch:\n' + ''.join(f'- node: {{pkg: pkg, exec: {e}, name: {n}}}\n'
+                                            for n, e in nodes))
+    err = prefix / 'stderr.txt'
+    env = dict(os.environ, ROBOTENIS_TOP=str(prefix))
+    with open(err, 'w') as f:
+        proc = subprocess.Popen([sys.executable, '-m', 'robotenis_bringup.launch_cli',
+                                 str(launch)], stderr=f, env=env)
+    try:
+        deadline = time.monotonic() + BOUND_S
+        for name, _ in nodes:       # each node's handler is set once it says 'running'
+            text = wait_for(err, f'started {name} (pid ', deadline)
+            wait_for(prefix / 'log' / 'launch' / f'{name}.log', 'running', deadline)
+        if kill is not None:
+            os.kill(int(re.search(rf'started {kill} \(pid (\d+)\)', text).group(1)),
+                    signal.SIGKILL)
+            wait_for(err, f'node {kill} died', deadline)
+        proc.send_signal(signal.SIGINT)
+        return proc.wait(timeout=BOUND_S), err.read_text()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        for pid in re.findall(r'\(pid (\d+)\)', err.read_text()):
+            try:
+                os.kill(int(pid), signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+
+
+def test_launch_exits_0_when_every_node_ran_and_stopped_cleanly(prefix):
+    """A node without a SIGINT handler dies of the signal (exit code -2): a clean stop too."""
+    status, err = run_launch(prefix, [('a', 'sleeper'), ('d', 'plain_sleeper')])
+    assert status == 0 and 'stopped d (exit code -2)' in err, err
+
+
+def test_launch_exits_non_zero_naming_a_node_killed_by_pid(prefix):
+    status, err = run_launch(prefix, [('a', 'sleeper'), ('b', 'sleeper')], kill='b')
+    assert status == 1 and 'robotenis launch: b died (exit code -9)' in err, err
+
+
+def test_launch_exits_non_zero_naming_a_node_that_crashed_on_shutdown(prefix):
+    status, err = run_launch(prefix, [('a', 'sleeper'), ('c', 'shutdown_crasher')])
+    assert status == 1 and 'robotenis launch: c exited with code 1 when stopped' in err, err

@@ -19,8 +19,8 @@ over the bag is calibrated exactly as `./robotenis calibrate BAG --out RESULT.ya
 is refused before anything moves, and a session whose joint states or detections stop for longer
 than a pose can last is stopped, naming the silent input, with its bag kept and no result
 (robotenis_calibration.session_limits). A second request while a session runs is refused with
-"busy"; progress goes to calibration/progress. On shutdown a bag being recorded is closed, so it stays
-whole. Parameters: the table PARAMETERS.
+"busy"; progress goes to calibration/progress. On shutdown a bag being recorded is closed, so it
+stays whole. Parameters: the table PARAMETERS.
 """
 import array
 import math
@@ -72,6 +72,9 @@ PARAMETERS = {
                          'share of the rests held out to test the calibration'),
     'image_topic': ('camera/image_raw', 'the images whose first frames of each rest are kept'),
     'images_per_pose': (2, 'images kept per rest, as PNG'),
+    'move_timeout': (RunnerConfig.move_timeout, 's to come to rest at a pose, else it is skipped'),
+    'measure_timeout': (RunnerConfig.measure_timeout,
+                        "s to collect a rest's frames before the pose is skipped"),
 }
 
 
@@ -165,11 +168,20 @@ class CalibrationNode(Node):
             marker.header.stamp = stamp
             self.rest_pub.publish(marker)
             self.record('calibration/rest', marker)
+            if kind == 'rest_end':
+                self.log_pose(int(value))
         elif kind == 'progress':
             stage, index, count = value
             self.publish_progress(stage, index, count, self.runner.fraction)
         elif kind == 'done' and not self.finished.done():
             self.finished.set_result(True)
+
+    def log_pose(self, index):
+        """Log how the pose ``index`` ended: its rest measured, or skipped with the reason."""
+        if self.runner.rests and self.runner.rests[-1].index == index:
+            self.get_logger().info(f'pose {index + 1}: rest measured')
+        elif self.runner.skipped and self.runner.skipped[-1][0] == index:
+            self.get_logger().warn(f'pose {index + 1} skipped: {self.runner.skipped[-1][1]}')
 
     def publish_progress(self, stage, index, count, fraction, message=''):
         msg = CalibrationProgress(stage=stage, pose_index=int(index), pose_count=int(count),
@@ -205,6 +217,12 @@ class CalibrationNode(Node):
         except (pipeline.CalibrationError, ValueError, OSError) as e:
             response.success, response.message = False, f'calibration failed: {e}'
             self.get_logger().error(response.message)
+        except Exception:
+            if self.context.ok():
+                raise
+            # SIGINT or SIGTERM shut the context down under the session (a publish then fails):
+            # a stop, not a crash; the bag is closed below.
+            response.success, response.message = False, 'the calibration node was stopped'
         finally:
             self.close_bag()
             self.runner = None
@@ -228,7 +246,9 @@ class CalibrationNode(Node):
         config = RunnerConfig(
             frames_per_pose=self.param('frames_per_pose', request.frames_per_pose),
             settle_time=request.settle_time if request.settle_time > 0
-            else self.get_parameter('settle_time').value)
+            else self.get_parameter('settle_time').value,
+            move_timeout=self.get_parameter('move_timeout').value,
+            measure_timeout=self.get_parameter('measure_timeout').value)
         refused = session_limits.refusal(n, config.frames_per_pose)
         if refused is not None:
             raise ValueError(f'request refused, nothing was moved: {refused}')
