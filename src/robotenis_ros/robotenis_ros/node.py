@@ -49,9 +49,10 @@ def spin(make_node, name, fatal=(ValueError,), args=None, finish=None):
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except _rclpy.RCLError:
-        # a callback caught mid-publish by Ctrl-C or SIGTERM (the signal handler shut the context
-        # down under it) is a normal stop; a failure while the context is alive is not
+    except (_rclpy.RCLError, RuntimeError):
+        # a callback or a take caught mid-way by Ctrl-C or SIGTERM (the signal handler shut the
+        # context down under it: RCLError from a publish, RuntimeError from rclpy's take of a
+        # message) is a normal stop; a failure while the context is alive is not
         if rclpy.ok():
             raise
     except fatal as e:

@@ -1,8 +1,9 @@
-"""Parameters declared from one table."""
+"""Parameters declared from one table; spinning until a clean stop."""
+import pytest
 import rclpy
 from rclpy.parameter import Parameter
 
-from robotenis_ros.node import declare_parameters
+from robotenis_ros.node import declare_parameters, spin
 
 TABLE = {'rate': (1000.0, 'Hz'), 'name': ('x', 'a name'), 'gains': ([1.0, 2.0], 'two gains')}
 
@@ -18,3 +19,26 @@ def test_the_table_is_declared_with_its_defaults_overrides_and_descriptions():
         node.destroy_node()
     finally:
         rclpy.try_shutdown()
+
+
+def failing_node(shut_down_first):
+    """Return a node factory whose timer raises as rclpy does when a signal shut it down."""
+    def make():
+        node = rclpy.create_node('spin_test')
+
+        def tick():
+            if shut_down_first:
+                rclpy.try_shutdown()   # what the signal handler does under a running callback
+            raise RuntimeError('Unable to convert call argument')
+        node.create_timer(0.01, tick)
+        return node
+    return make
+
+
+def test_an_error_after_the_context_was_shut_down_is_a_clean_stop():
+    assert spin(failing_node(True), 'spin_test') == 0
+
+
+def test_an_error_while_the_context_is_alive_is_not_hidden():
+    with pytest.raises(RuntimeError, match='Unable to convert'):
+        spin(failing_node(False), 'spin_test')
