@@ -47,14 +47,13 @@ import hashlib
 import itertools
 import json
 import math
-import os
 from pathlib import Path
 import platform
-import tempfile
 import time
 
 import cv2
 import numpy as np
+from robotenis_kinematics import files
 import yaml
 
 BALL_RADIUS_M = 0.019
@@ -776,18 +775,6 @@ def scene_key(scene, repeat=None):
     return f"{scene['id']}-{hashlib.sha256(text.encode()).hexdigest()[:10]}"
 
 
-def _write_atomic(path, data):
-    fd, tmp = tempfile.mkstemp(prefix='.tmp-', suffix=path.suffix, dir=path.parent)
-    try:
-        with os.fdopen(fd, 'wb') as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def _png(image):
     ok, data = cv2.imencode('.png', image)
     if not ok:
@@ -809,8 +796,8 @@ def cached(scene, folder):
         return (cv2.imread(str(png), cv2.IMREAD_UNCHANGED),
                 yaml.safe_load(truth_path.read_text()), False)
     image, truth = render(scene)
-    _write_atomic(truth_path, yaml.safe_dump(truth, sort_keys=False).encode())
-    _write_atomic(png, _png(image))
+    files.write_atomic(truth_path, yaml.safe_dump(truth, sort_keys=False).encode())
+    files.write_atomic(png, _png(image))
     return image, truth, True
 
 
@@ -820,7 +807,7 @@ def cached_repeat(scene, image, truth, k, folder):
     if path.exists():
         return cv2.imread(str(path), cv2.IMREAD_UNCHANGED), False
     out = render_repeat(scene, image, truth, k)
-    _write_atomic(path, _png(out))
+    files.write_atomic(path, _png(out))
     return out, True
 
 
@@ -964,7 +951,7 @@ def cached_scene_list(count, seed, folder, spp=64, min_contrast=10.0):
     if path.exists():
         return json.loads(path.read_text())
     scenes = _plain(scene_list(count, seed, spp, min_contrast))
-    _write_atomic(path, json.dumps(scenes).encode())
+    files.write_atomic(path, json.dumps(scenes).encode())
     return scenes
 
 
@@ -991,9 +978,9 @@ def write_test_set(folder, count, seed, repeat_ids=(), repeats=0, cache=None):
         kept = {k: truth[k] for k in TRUTH_KEYS}
         kept['renderer'] = {k: truth['renderer'][k] for k in
                             ('name', 'version', 'variant', 'spp_used', 'frame_spp', 'window')}
-        _write_atomic(folder / f"{scene['id']}.png", _png(image))
-        _write_atomic(folder / f"{scene['id']}.yaml",
-                      yaml.safe_dump(_plain(kept), sort_keys=False).encode())
+        files.write_atomic(folder / f"{scene['id']}.png", _png(image))
+        files.write_atomic(folder / f"{scene['id']}.yaml",
+                           yaml.safe_dump(_plain(kept), sort_keys=False).encode())
         x0, y0, w, h = truth['renderer']['window']
         names = []
         for k in range(repeats if scene['id'] in repeat_ids else 0):
@@ -1002,13 +989,14 @@ def write_test_set(folder, count, seed, repeat_ids=(), repeats=0, cache=None):
             else:
                 frame, _ = cached_repeat(scene, image, truth, k, cache)
             names.append(f"{scene['id']}-r{k}.png")
-            _write_atomic(folder / names[-1], _png(frame[y0:y0 + h, x0:x0 + w]))
+            files.write_atomic(folder / names[-1], _png(frame[y0:y0 + h, x0:x0 + w]))
         entries.append({'id': scene['id'], 'light': scene['light']['type'],
                         'direction': scene['light']['direction'],
                         'background': scene['background']['type'],
                         'material': scene['material']['type'], 'repeats': names})
     index = {'count': count, 'seed': seed, 'frame_spp': FRAME_SPP, 'images': entries}
-    _write_atomic(folder / 'index.yaml', yaml.safe_dump(_plain(index), sort_keys=False).encode())
+    files.write_atomic(folder / 'index.yaml',
+                       yaml.safe_dump(_plain(index), sort_keys=False).encode())
 
 
 def main(argv=None):
@@ -1045,9 +1033,9 @@ def main(argv=None):
     entries = []
     for scene in scene_list(args.count, args.seed, args.spp, args.min_contrast)[args.first:]:
         image, truth = render(scene)
-        _write_atomic(args.out / f"{scene['id']}.png", _png(image))
-        _write_atomic(args.out / f"{scene['id']}.yaml",
-                      yaml.safe_dump(truth, sort_keys=False).encode())
+        files.write_atomic(args.out / f"{scene['id']}.png", _png(image))
+        files.write_atomic(args.out / f"{scene['id']}.yaml",
+                           yaml.safe_dump(truth, sort_keys=False).encode())
         entries.append({'id': scene['id'], 'light': scene['light']['type'],
                         'direction': scene['light']['direction'],
                         'background': scene['background']['type'],
@@ -1061,7 +1049,8 @@ def main(argv=None):
     index = {'count': args.count, 'seed': args.seed, 'spp': args.spp, 'frame_spp': FRAME_SPP,
              'min_contrast': args.min_contrast, 'camera': asdict(PROJECT_CAMERA),
              'python': platform.python_version(), 'images': entries}
-    _write_atomic(args.out / 'index.yaml', yaml.safe_dump(_plain(index), sort_keys=False).encode())
+    files.write_atomic(args.out / 'index.yaml',
+                       yaml.safe_dump(_plain(index), sort_keys=False).encode())
     return 0
 
 

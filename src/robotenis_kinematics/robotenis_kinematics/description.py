@@ -22,10 +22,10 @@ positive down).
 from dataclasses import dataclass, field
 import math
 import os
-import tempfile
 
 import numpy as np
 from robotenis_kinematics import effects as effect_models
+from robotenis_kinematics import files
 from robotenis_kinematics.errors import DescriptionError
 import yaml
 
@@ -190,19 +190,7 @@ def dumps(desc):
 
 def save(desc, path):
     """Write atomically: temp file in the same folder, then rename, so nothing is half written."""
-    text = dumps(desc)
-    folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix='.tmp-', suffix='.yaml', dir=folder)
-    try:
-        with os.fdopen(fd, 'w') as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    files.write_atomic(path, dumps(desc))
 
 
 def config_path(name):

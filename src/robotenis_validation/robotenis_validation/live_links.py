@@ -27,17 +27,21 @@ from robotenis_vision import detector
 METHODS = ('conic', 'model')
 
 
+def true_centres(truth, Theta, direction):
+    """Return the ball's true centres in the optical frame (K, 3) for rests' readings."""
+    arm = truth.arm_angles(truth.motor_from_reading(Theta), direction)
+    return static_session.sphere_in_camera(truth, delta.forward(truth.geometry,
+                                                                np.atleast_2d(arm)))
+
+
 def true_sphere(truth, Theta, direction):
     """Return where the truth's camera measures the ball (K, 3) for rests' readings."""
-    arm = truth.arm_angles(truth.motor_from_reading(Theta), direction)
-    P = delta.forward(truth.geometry, np.atleast_2d(arm))
-    return truth.camera_reading(static_session.sphere_in_camera(truth, P))
+    return truth.camera_reading(true_centres(truth, Theta, direction))
 
 
 def detector_errors(truth, Theta, direction, method, rng):
     """Return detection minus truth (n, 3) of renders at the rests' true positions (m)."""
-    arm = truth.arm_angles(truth.motor_from_reading(Theta), direction)
-    C = static_session.sphere_in_camera(truth, delta.forward(truth.geometry, arm))
+    C = true_centres(truth, Theta, direction)
     camera, R = vision_camera.default(), truth.geometry.sphere_radius
     out = []
     for c in C:

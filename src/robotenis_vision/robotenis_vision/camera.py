@@ -20,9 +20,9 @@ specified for.
 """
 from dataclasses import dataclass, field
 import os
-import tempfile
 
 import numpy as np
+from robotenis_kinematics import files
 import yaml
 
 DEFAULT_K = ((500.0, 0.0, 319.5), (0.0, 500.0, 239.5), (0.0, 0.0, 1.0))
@@ -288,16 +288,7 @@ def dumps(camera):
 
 def save(camera, path):
     """Write the camera_info YAML atomically (temporary file in the same folder, then rename)."""
-    folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix='.tmp-', suffix='.yaml', dir=folder)
-    try:
-        with os.fdopen(fd, 'w') as f:
-            f.write(dumps(camera))
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    files.write_atomic(path, dumps(camera))
 
 
 def default():
