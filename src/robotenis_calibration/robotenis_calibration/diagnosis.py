@@ -18,14 +18,15 @@ The residual loop: find what the model lacks, add it, and prove it helped on hel
    candidates left), else the most significant generic one, keeping only its parameters that are
    identifiable together with the rest (H_i beside h_i is not), and refit.
 4. Keep it only if the fit improves significantly (likelihood ratio, chi2(q), at the current
-   floor) and the held-out poses do too (one-sided paired t-test of their per-pose chi-square,
-   before against after). A named effect is then confronted with the generic ones (encompassing
-   score tests: does each add to the other?): it is claimed only if no generic model adds to it;
-   if a generic adds and the name adds nothing to the generic, the generic stands and the name
-   is dropped (a library effect that explains a part of an unknown one is not that effect); if
-   each adds to the other, the generic stands and the name must still add on top of it in a
-   later round to be claimed. After each effect kept the floor is learned again; repeat until
-   no candidate is left significant.
+   floor) and the held-out poses confirm it (``holdout_confirmation``: their residuals under
+   the model before move as the model after predicts, beyond their noise). A named effect is
+   then confronted with the generic ones (encompassing score tests: does each add to the
+   other?): it is claimed only if no generic model adds to it; if a generic adds and the name
+   adds nothing to the generic, the generic stands and the name is dropped (a library effect
+   that explains a part of an unknown one is not that effect); if each adds to the other, the
+   generic stands and the name must still add on top of it in a later round to be claimed.
+   After each effect kept the floor is learned again; repeat until no candidate is left
+   significant.
 5. The held-out poses then test the whole model and floor: their chi-square against chi2(3K)
    (with the fitted parameters' own error in the predictive covariance). If it is too large, a
    fallback tests the residuals' correlation with what could explain them (joint angle, motion
@@ -211,17 +212,19 @@ def cross_validated_size(result, meas, name, rng, folds=FOLDS):
     largest = ORDERS if name == 'joint_harmonics' else DEGREE
     proposed, r_w, J_w = candidate_problem(result, meas, name, largest)
     p = len(result.names)
-    names = result.names + tuple(proposed[j] for j in identifiable(J_w, p)[0])
-    J_w = J_w[:, [(result.names + proposed).index(n) for n in names]]
     cv = _FoldedProblem(r_w, J_w, np.repeat(rng.permutation(len(meas)) % folds, 3), folds)
     if name == 'joint_harmonics':
         pool, most = ORDERS, MAX_ORDERS
     else:
-        pool, most = names[p:], MAX_FIELD_TERMS
+        pool, most = proposed, MAX_FIELD_TERMS
 
     def columns(size):
-        extra = candidate_parameters(name, size) if size else ()
-        return list(range(p)) + [names.index(n) for n in extra if n in names]
+        # identifiable within this size only: over a joint's short range of angle the whole
+        # pool is nearly dependent, and checking it in order would drop a high order's sine
+        extra = [p + proposed.index(n) for n in candidate_parameters(name, size)
+                 if n in proposed] if size else []
+        keep = identifiable(J_w[:, list(range(p)) + extra], p)[0]
+        return list(range(p)) + [extra[j] for j in keep]
 
     chosen = _forward_selection(pool, most, lambda size: cv.error(columns(size)),
                                 lambda n: len(columns((n,))) - p)
@@ -389,6 +392,27 @@ def holdout_test(result, floor, meas, R):
     return chi2, len(r), float(stats.chi2.sf(chi2, len(r)))
 
 
+def holdout_confirmation(before, after, hold):
+    """
+    Return the one-sided p-value that the held-out poses move as ``after`` predicts.
+
+    With r the held-out whitened residuals under ``before``, P = I + J C J^T their predictive
+    covariance (the fitted parameters' own error added, as in ``holdout_test``) and d = r - r_after
+    the change ``after`` predicts, z = d^T P^-1 r / sqrt(d^T P^-1 d) is N(0, 1) when what
+    ``after`` adds is absent: d then depends on the training noise only through the added
+    coefficients, which are independent of ``before``'s parameters (their columns are projected
+    out of them), and r on the held-out noise and those parameters. A real effect leaves its
+    signal in r along d. This is the score test along the one direction the training poses
+    predict, far more powerful than comparing per-pose chi-squares, whose squared noise swamps
+    an effect of a few noise widths.
+    """
+    r, J = idf.whitened_problem(before.model, hold, before.names)
+    d = r - idf.whitened_problem(after.model, hold, ())[0]
+    w = np.linalg.solve(np.eye(len(r)) + J @ before.covariance @ J.T, d)
+    spread = float(np.sqrt(max(d @ w, 0.0)))
+    return float(stats.norm.sf(w @ r / spread)) if spread > 0 else 1.0
+
+
 class _Loop:
     """The state of one run: the split, the current fit and floor, the steps so far."""
 
@@ -411,10 +435,8 @@ class _Loop:
                             self.widened(self.m_train), self.current.names + test.parameters)
 
     def compare(self, before, after):
-        """Return the one-sided p-value that ``after`` fits the held-out poses better."""
-        hold = self.widened(self.m_hold)
-        return float(stats.ttest_rel(pose_chi2(before.model, hold), pose_chi2(after.model, hold),
-                                     alternative='greater').pvalue)
+        """Return the one-sided p-value that the held-out poses confirm ``after``."""
+        return holdout_confirmation(before, after, self.widened(self.m_hold))
 
     def tests(self, remaining):
         """Return the score tests of the candidates left (generic ones at their CV size)."""

@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 from robotenis_calibration import diagnosis, poses, result
 from robotenis_calibration.session import Session
-from robotenis_kinematics import delta, description, effects, synthetic
+from robotenis_kinematics import delta, description, effects, synthetic, variance
+from robotenis_kinematics import identification as idf
 from robotenis_sim import static_session
 from robotenis_sim import truth as sim_truth
 from robotenis_sim.scenarios import EFFECTS as STUDY, OUTSIDE_LIBRARY
@@ -88,6 +89,51 @@ def test_an_effect_outside_the_library_is_never_named(setting, name):
             found.append(seed)
             assert d.errors_mm['final'] < d.errors_mm['plain'], seed
     assert len(found) >= 4, found
+
+
+def test_a_high_order_harmonic_is_chosen_whole(setting):
+    """
+    An eccentricity of order 7 (the scenarios' is 5): the series holds an order near it, whole.
+
+    Over a joint's short range of angle the pool of harmonics is nearly dependent; each size's
+    columns are checked for identifiability on their own, so no order loses its sine to lower
+    orders taken before it.
+    """
+    nominal, truth, P = setting
+    eccentricity = {'order': 7, 'amplitude': [3.5e-4] * 3, 'phase': [0.5, 2.0, 4.0]}
+    truth = sim_truth.with_effects(truth, joint_eccentricity=eccentricity)
+    for seed in (31, 32):
+        d = diagnose(session(truth, nominal, P, seed, FLOOR), seed)
+        assert d.effects == ['joint_harmonics'], (seed, d.effects)
+        orders = d.sizes['joint_harmonics']
+        assert set(orders) & {6, 7, 8}, (seed, orders)
+        # every order chosen acts through its cosine and its sine on every joint
+        for n in orders:
+            assert all(np.all(d.final.model.effects[f'joint_{kind}{n}'] != 0)
+                       for kind in ('cos', 'sin')), (seed, n)
+        assert d.errors_mm['final'] < d.errors_mm['plain']
+
+
+def test_holdout_confirmation_is_uniform_when_the_effect_is_absent(setting):
+    """
+    On clean sessions the held-out confirmation of an absent effect is uniform in [0, 1].
+
+    30 sessions of 150 poses, joint_scale added to the plain fit; Kolmogorov-Smirnov at 0.1 %.
+    """
+    nominal, truth, P = setting
+    p = []
+    for seed in range(200, 230):
+        meas = session(truth, nominal, P[:150], seed, FLOOR).measurements()
+        train, hold = diagnosis.split(len(meas), 0.3, np.random.default_rng(seed))
+        plain, floor = variance.identify(idf.initial_model(nominal, meas.subset(train)),
+                                         meas.subset(train))
+        m_train = floor.widen(meas.subset(train), nominal.camera_rotation)
+        test = diagnosis.score_test(plain, m_train, 'joint_scale')
+        after = idf.identify(diagnosis.with_candidate(plain.model, 'joint_scale'), m_train,
+                             plain.names + test.parameters)
+        p.append(diagnosis.holdout_confirmation(
+            plain, after, floor.widen(meas.subset(hold), nominal.camera_rotation)))
+    assert stats.kstest(p, 'uniform').pvalue > 1e-3, np.round(np.sort(p), 3)
 
 
 def test_a_generic_effect_is_written_with_what_it_correlates_with(setting, tmp_path):
