@@ -118,9 +118,14 @@ def residual_loop(nominal, truth, args):
     print(f'   wrote {path} and residuals.png (try: ./robotenis fk --model {path})')
 
 
+# what part 4's robot may hide: the named effects and those outside the library
+LIVE_EFFECTS = {**{k: v for k, v in scenarios.EFFECTS.items() if v},
+                **{k: v for k, (v, _) in scenarios.OUTSIDE_LIBRARY.items()}}
+
+
 def ros_session(nominal, truth, args):
     """Part 3: launch the nodes, call /calibrate, print the service's answer; the exit status."""
-    robot = sim_truth.with_effects(truth, **scenarios.EFFECTS['backlash'])
+    robot = sim_truth.with_effects(truth, **LIVE_EFFECTS[args.effect])
     out = os.path.abspath(args.out)
     os.makedirs(out, exist_ok=True)
     truth_path = os.path.join(out, 'truth.yaml')
@@ -132,8 +137,8 @@ def ros_session(nominal, truth, args):
         yaml.safe_dump({'/**/calibration': {'ros__parameters': {'sphere_guess': guess}}}, f)
     bag = os.path.join(out, time.strftime('session-%Y%m%d-%H%M%S'))
     print(f'4. the whole loop through ROS: {args.ros_poses} poses, {args.frames} frames each, '
-          f'settle {args.settle} s; simulated time, the simulator and the controller in lockstep '
-          'at 1 kHz')
+          f'settle {args.settle} s, the robot hiding {args.effect}; simulated time, the simulator '
+          'and the controller in lockstep at 1 kHz')
     top = os.environ.get('ROBOTENIS_TOP', os.getcwd())
     nodes = launch_file.load(launch_file.find('calibration.launch.yaml'), {
         'sim_time': 'true', 'truth_path': truth_path, 'params_file': params_path,
@@ -166,6 +171,8 @@ def main(argv=None):
                         help='poses of the session through ROS')
     parser.add_argument('--frames', type=int, default=30, help='camera frames averaged per pose')
     parser.add_argument('--settle', type=float, default=0.3, help='settle time at each pose (s)')
+    parser.add_argument('--effect', default='backlash', choices=sorted(LIVE_EFFECTS),
+                        help="what the simulated robot hides in the session through ROS")
     args = parser.parse_args(argv)
     nominal, truth = description.nominal(), sim_truth.load()
     identification(nominal, truth, args)
