@@ -172,7 +172,7 @@ def main(argv=None):
     parser.add_argument('--frames', type=int, default=30, help='camera frames averaged per pose')
     parser.add_argument('--settle', type=float, default=0.3, help='settle time at each pose (s)')
     parser.add_argument('--effect', default='backlash', choices=sorted(LIVE_EFFECTS),
-                        help="what the simulated robot hides in the session through ROS")
+                        help='what the simulated robot hides in the session through ROS')
     args = parser.parse_args(argv)
     nominal, truth = description.nominal(), sim_truth.load()
     identification(nominal, truth, args)
