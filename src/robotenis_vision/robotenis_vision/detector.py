@@ -94,7 +94,7 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0):
         except DetectionError as e:
             failures.append(str(e))
             continue
-        if not any(_same_ball(det.position, d.position, radius) for d, _, _ in found):
+        if not any(_same_ball(camera, det.position, d.position, radius) for d, _, _ in found):
             found.append((det, sphere.score, sphere.c))
     if not found:
         if failures:
@@ -148,8 +148,16 @@ def _alike(a, b):
             and b.extra['psf_sigma'] <= SECOND_BLUR * a.extra['psf_sigma'] + 0.5)
 
 
-def _same_ball(a, b, R):
-    return np.linalg.norm(np.asarray(a) - np.asarray(b)) < 2 * R
+def _same_ball(camera, a, b, R):
+    """
+    Return whether spheres a and b (m) are one blob of the image: a centre inside the other disc.
+
+    Not by their distance in space: a search's sphere of the wrong size at the same place (the
+    highlight's ring, the terminator) is far from the right one in depth, yet the same ball.
+    """
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    radius_px = max(camera.fx * R / np.sqrt(max(c @ c - R * R, 1e-12)) for c in (a, b))
+    return np.linalg.norm(camera.project(a) - camera.project(b)) < radius_px
 
 
 def find(img, camera, radius):
@@ -173,7 +181,7 @@ def find(img, camera, radius):
         if (sphere is None or sphere.score < MIN_SCORE or not sphere.c[2] > radius
                 or not RANGE[0] <= np.linalg.norm(sphere.c) <= RANGE[1]):
             continue
-        same = [k for k, s in enumerate(spheres) if _same_ball(s.c, sphere.c, radius)]
+        same = [k for k, s in enumerate(spheres) if _same_ball(camera, s.c, sphere.c, radius)]
         if same:
             if sphere.score > spheres[same[0]].score:
                 spheres[same[0]] = sphere

@@ -122,3 +122,19 @@ def test_what_cannot_be_measured_is_refused_with_a_reason():
         detector.detect(np.zeros((480, 640, 3), np.uint8), CAM, R)
     with pytest.raises(ValueError, match='method'):
         detector.detect(blank, CAM, R, 'hough')
+
+
+def test_one_blob_found_at_two_sizes_is_one_ball():
+    """
+    The search's spheres of one blob at two sizes are one ball, not two (never 'ambiguous').
+
+    Shading (a highlight's ring, a terminator) gives the search a second sphere at the ball's place
+    whose size, hence depth, is wrong; it must be merged with the ball, while two balls side by
+    side stay two.
+    """
+    c = np.array([0.05, -0.02, 0.35])
+    assert detector._same_ball(CAM, c, 1.3 * c, R)
+    assert detector._same_ball(CAM, c, c + [0.004, 0.003, -0.05], R)
+    beside = c + [2.5 * R, 0.0, 0.0]
+    assert not detector._same_ball(CAM, c, beside, R)
+    assert not detector._same_ball(CAM, c, 1.3 * beside, R)
