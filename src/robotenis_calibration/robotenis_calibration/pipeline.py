@@ -19,12 +19,15 @@ import shlex
 import shutil
 import tempfile
 
+import numpy as np
+
 from robotenis_calibration import diagnosis, rests, result
 from robotenis_calibration.rests import RestParameters
 from robotenis_kinematics import description
 from robotenis_ros.names import JOINTS
 
 MIN_POSES = 20   # below this the 15 parameters plus a held-out set are not worth fitting
+SIDE_ROUNDS = 5  # backlash sides and gap found in turn, at most this many times
 
 
 class CalibrationError(RuntimeError):
@@ -96,6 +99,28 @@ def calibrate_session(session, settings=Settings(), progress=None):
     if len(session) < MIN_POSES:
         raise CalibrationError(f'only {len(session)} usable rests in the session; at least '
                                f'{MIN_POSES} are needed')
+    d, meas = _loop(session, settings, progress)
+    # the sides were first taken from any reversal; with a gap found, only a reversal longer
+    # than it moves the contact (an overshoot at a move's end does not). Sides taken wrong make
+    # the gap look smaller, so sides and gap are found in turn until the sides stay.
+    for _ in range(SIDE_ROUNDS):
+        if 'backlash' not in d.final.model.effects:
+            break
+        width = d.final.model.effects['backlash']
+        sided = session.with_backlash(width)
+        changed = int(np.sum(sided.direction != session.direction))
+        if not changed:
+            break
+        if progress:
+            progress(f'backlash {np.round(width * 1e3, 3)} mrad: {changed} of '
+                     f'{session.direction.size} joint sides re-derived from motions longer than '
+                     'the gap; the loop runs again')
+        session = sided
+        d, meas = _loop(session, settings, progress)
+    return d, meas
+
+
+def _loop(session, settings, progress):
     meas = session.measurements()
     try:
         d = diagnosis.run(session.description, meas, session.sphere, session.stamps,

@@ -458,22 +458,31 @@ def known_gate(x, cov, alpha):
 
 # rad: a joint this far from its rest value was moving toward it (5 counts and the noise)
 MOVED = 2e-4
+GAPS = MOVED * 1.25 ** np.arange(20)     # rad: reversals a side may need, 0.2 to 14 mrad
+# the sides before any backlash is known: a reversal shorter than a coarse gear's backlash (about
+# 10 arcmin) is taken for a controller's overshoot, which leaves the contact where it was
+START_GAP = int(np.argmin(np.abs(np.log(GAPS / 3e-3))))
 
 
-def approach_direction(t_joint, Theta, t0, rest, previous):
+def approach_directions(t_joint, Theta, t0, rest, previous, gaps=GAPS):
     """
-    Return the sign of each joint's motion into the rest that starts at t0.
+    Return the sign of each joint's motion into the rest that starts at t0, per gap (G, 3).
 
-    With mean readings ``rest`` (3,): from the last reading before t0 farther than MOVED from it; a
-    joint that did not move keeps ``previous``. The joint states show the motion through every pose
-    visited, measured or not.
+    With mean readings ``rest`` (3,): from the last reading before t0 farther than the gap from
+    it (a backlash's contact side changes only when the motor comes back by more than its width);
+    a joint that did not move that far keeps ``previous`` (G, 3). The joint states show the
+    motion through every pose visited, measured or not.
     """
     before = Theta[:np.searchsorted(t_joint, t0)]
     out = np.array(previous, dtype=float)
     for j in range(3):
-        away = np.flatnonzero(np.abs(before[:, j] - rest[j]) > MOVED)
-        if len(away):
-            out[j] = np.sign(rest[j] - before[away[-1], j])
+        dist = np.abs(before[:, j] - rest[j])
+        # the farthest distance from here on: the last reading beyond g is the last index where
+        # that running maximum exceeds g
+        reach = np.maximum.accumulate(dist[::-1])[::-1]
+        last = np.searchsorted(-reach, -np.asarray(gaps), side='left') - 1
+        moved = last >= 0
+        out[moved, j] = np.sign(rest[j] - before[last[moved], j])
     return out
 
 
@@ -500,7 +509,7 @@ def average(rec, windows, params, notes):
     camera = frame_noise([x[_provisional(x)] for x in spheres], z, np.full(3, SPHERE_FLOOR ** 2))
     joints = frame_noise(readings, z, q ** 2 / 12, grow=False)
     camera_cov, joint_cov = camera.covariance(z), joints.covariance(z)
-    rows, rejected, total, direction = [], 0, 0, np.ones(3)
+    rows, rejected, total, direction = [], 0, 0, np.ones((len(GAPS), 3))
     for k, (t0, t1, label) in enumerate(kept_windows):
         keep = known_gate(spheres[k], camera_cov[k], params.alpha)
         keep_T = known_gate(readings[k], joint_cov[k], params.alpha)
@@ -511,15 +520,16 @@ def average(rec, windows, params, notes):
             continue
         rejected, total = rejected + len(keep) - n, total + len(keep)
         th = readings[k][keep_T].mean(axis=0)
-        direction = approach_direction(rec.t_joint, rec.Theta, t0, th, direction)
+        direction = approach_directions(rec.t_joint, rec.Theta, t0, th, direction)
         rows.append((th, np.sqrt(np.diag(joint_cov[k]) / n_T), spheres[k][keep].mean(axis=0),
                      camera_cov[k] / n, 0.5 * (t0 + t1), n, direction))
     notes.append(f'{rejected} of {total} finite camera frames in the rests rejected as outliers')
     if not rows:
         return _empty(rec.description)
-    Theta, sigma, sphere, cov, stamps, samples, direction = (np.array(v) for v in zip(*rows))
-    return Session(rec.description, Theta, sigma, sphere, cov, stamps, samples, direction,
-                   {'camera': camera.as_dict(), 'resolvers': joints.as_dict()})
+    Theta, sigma, sphere, cov, stamps, samples, approach = (np.array(v) for v in zip(*rows))
+    return Session(rec.description, Theta, sigma, sphere, cov, stamps, samples,
+                   approach[:, START_GAP], {'camera': camera.as_dict(),
+                                            'resolvers': joints.as_dict()}, approach, GAPS)
 
 
 def _provisional(x):

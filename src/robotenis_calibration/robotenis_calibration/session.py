@@ -6,6 +6,7 @@ simulator -- a session is the declared robot description plus, for each pose the
 in visit order: the resolver increments and the sphere centre seen by the hand camera, each
 averaged over the rest with its uncertainty.
 """
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,6 +31,8 @@ class Session:
         it (poses visited but not measured lie between rests); by default from the order of Theta.
     noise : the frames' and readings' noise models the averages were made with (plain data, for the
         result file), or None.
+    approach : (K, G, 3) the same sign taken from the last reading farther than each of ``gaps``
+        (G,) rad from the rest, when the recording shows the motion; ``direction`` is the first.
     """
 
     description: object
@@ -41,6 +44,8 @@ class Session:
     samples: np.ndarray = field(default=None)
     direction: np.ndarray = field(default=None)
     noise: dict = field(default=None)
+    approach: np.ndarray = field(default=None)
+    gaps: np.ndarray = field(default=None)
 
     def __post_init__(self):
         K = len(self.Theta)
@@ -64,7 +69,25 @@ class Session:
         """Return the rests selected by ``index`` (visit order is kept for a sorted index)."""
         return Session(self.description, self.Theta[index], self.sigma_Theta[index],
                        self.sphere[index], self.sphere_cov[index], self.stamps[index],
-                       self.samples[index], self.direction[index], self.noise)
+                       self.samples[index], self.direction[index], self.noise,
+                       None if self.approach is None else self.approach[index], self.gaps)
+
+    def with_backlash(self, width):
+        """
+        Return the session with each joint's side from its last motion longer than its backlash.
+
+        ``width`` (3,) rad: a reversal shorter than the gap leaves the contact where it was (an
+        overshoot at the end of a move), so a joint's side is taken from the last reading farther
+        from the rest than its width (the nearest of ``gaps``, at least the first; a width fitted
+        negative, on sides taken mostly wrong, by its size). The session itself when the
+        recording did not give the approaches.
+        """
+        if self.approach is None:
+            return self
+        g = np.abs(np.log(self.gaps)[:, None] - np.log(np.maximum(np.abs(width), self.gaps[0])))
+        pick = np.argmin(g, axis=0)
+        direction = self.approach[:, pick, np.arange(3)]
+        return dataclasses.replace(self, direction=direction)
 
     def measurements(self, camera_rotation=None):
         """

@@ -260,6 +260,25 @@ def test_an_undeclared_effect_in_the_truth_is_named_in_the_result(tmp_path):
     assert outcome.diagnosis.errors_mm['final'] < outcome.diagnosis.errors_mm['plain']
 
 
+def test_backlash_sides_ignore_an_overshoot_shorter_than_the_gap(tmp_path):
+    """
+    Half the joints' moves pass their rest by 0.4 mrad and come back; the gear's gap is 0.6-1 mrad.
+
+    Such a return does not cross the gap, so the contact stays on the approach's side (the
+    simulated truth). Taking the side from that return (the rule before) lost the backlash
+    altogether on this bag; the sides and the gap found in turn give the gap within its noise.
+    """
+    width = np.array(EFFECTS['backlash']['backlash'])
+    assert np.all(4e-4 < width)
+    bag = bag_sim.write(tmp_path / 'bag', bag_sim.BagSpec(poses=120, seed=13, overshoot=4e-4,
+                                                          effects=EFFECTS['backlash']))
+    pipeline.calibrate_bag(bag.path, tmp_path / 'RESULT.yaml')
+    (effect,) = description.load(tmp_path / 'RESULT.yaml').effects
+    assert effect['name'] == 'backlash'
+    z = (np.array(effect['width']) - width) / np.array(effect['width_std'])
+    assert np.sum(z ** 2) < chi2_bound(3), z
+
+
 def test_joint_states_serialized_by_rclpy_are_read(tmp_path):
     """Accept rclpy's JointState bytes, which have no padding before an empty effort sequence."""
     from rclpy.serialization import serialize_message

@@ -51,6 +51,7 @@ TAIL = 0.1                             # s still after the end marker, before th
 MOVE_TIME = (0.3, 1.0)
 # ball holder after arrival: amplitude m, decay time s, frequency Hz
 VIBRATION = (2e-4, 0.05, 12.0)
+OVERSHOOT_TIME = 0.1                   # s after arrival for an overshoot's way back
 FALSE_OFFSET = (1e-3, 5e-3)            # m: how far off a false detection is
 LATENCY_NS = 300_000                   # recording time after the stamp, ns
 CAMERA = static_session.DEFAULT_CAMERA
@@ -83,6 +84,9 @@ class BagSpec:
     move_time: tuple = MOVE_TIME        # s: a move takes a + b * (largest joint motion, rad)
     vibration: tuple = VIBRATION        # the ball holder's shake after arrival
     rest_floor: tuple = (0.0, 0.0, 0.0)  # m, optical axes: each rest's own error, not averaged out
+    overshoot: float = 0.0              # rad past a rest and back (readings), less than any
+    #                                     backlash gap: the contact side stays the approach's;
+    overshoot_fraction: float = 0.5     # of the joints' moves, drawn at random
     stamp_jitter: float = 0.0           # s: standard deviation of the header stamps' jitter
     joints: tuple = ('motor_1', 'motor_2', 'motor_3')   # the joint names the driver publishes
     markers: bool = True
@@ -176,8 +180,13 @@ def frames(t0, t1, spec):
     return np.arange(np.ceil(t0 / period - 1e-6), np.floor(t1 / period + 1e-6) + 1) * period
 
 
-def readings(t, Theta, times):
-    """Return noise-free readings at t, (n, 3): moves 10 s^3 - 15 s^4 + 6 s^5 between rests."""
+def readings(t, Theta, times, overshoot=0.0):
+    """
+    Return noise-free readings at t, (n, 3): moves 10 s^3 - 15 s^4 + 6 s^5 between rests.
+
+    With ``overshoot`` (K, 3) rad, each joint passes rest k by that much and comes back the same
+    way in OVERSHOOT_TIME after arriving, as a controller does.
+    """
     starts = np.concatenate([[-np.inf], times[:, 0]])
     # 0: idle at home; k: moving to or at rest k
     k = np.searchsorted(starts, t, side='right') - 1
@@ -185,8 +194,21 @@ def readings(t, Theta, times):
     to = np.vstack([np.zeros((1, 3)), Theta])[k]
     start = np.concatenate([[0.0], times[:, 0]])[k]
     duration = np.concatenate([[1.0], times[:, 1] - times[:, 0]])[k]
+    past = np.vstack([np.zeros((1, 3)), np.broadcast_to(overshoot, Theta.shape)])[k]
+    past = past * np.sign(to - frm)
     s = np.clip((t - start) / duration, 0.0, 1.0)[:, None]
-    return frm + (to - frm) * s ** 3 * (10 - 15 * s + 6 * s ** 2)
+    back = np.clip((t - start - duration) / OVERSHOOT_TIME, 0.0, 1.0)[:, None]
+    return frm + (to + past - frm) * _smooth(s) - past * _smooth(back)
+
+
+def overshoots(spec, K):
+    """Return how far each joint passes each rest (K, 3), rad: ``overshoot`` in a random share."""
+    chosen = np.random.default_rng([spec.seed, 7]).random((K, 3)) < spec.overshoot_fraction
+    return spec.overshoot * chosen
+
+
+def _smooth(s):
+    return s ** 3 * (10 - 15 * s + 6 * s ** 2)
 
 
 @functools.lru_cache(maxsize=1)
@@ -297,7 +319,8 @@ def _joint_states(t0, t1, Theta, times, spec, msgs, rngs):
     """
     rng, bad_rng = rngs
     t = np.arange(np.ceil(t0 * spec.joint_rate), np.ceil(t1 * spec.joint_rate)) / spec.joint_rate
-    raw = readings(t, Theta, times) + rng.normal(scale=RESOLVER.noise, size=(len(t), 3))
+    raw = (readings(t, Theta, times, overshoots(spec, len(Theta)))
+           + rng.normal(scale=RESOLVER.noise, size=(len(t), 3)))
     Th = np.round(raw / RESOLVER.resolution) * RESOLVER.resolution
     keep = corrupt(Th, spec, bad_rng, false_offsets=False)
     stamps = jittered(t, spec, bad_rng)
