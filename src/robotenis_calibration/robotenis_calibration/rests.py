@@ -464,16 +464,17 @@ GAPS = MOVED * 1.25 ** np.arange(20)     # rad: reversals a side may need, 0.2 t
 START_GAP = int(np.argmin(np.abs(np.log(GAPS / 3e-3))))
 
 
-def approach_directions(t_joint, Theta, t0, rest, previous, gaps=GAPS):
+def approach_directions(t_joint, Theta, t0, rest, previous, since=-np.inf, gaps=GAPS):
     """
     Return the sign of each joint's motion into the rest that starts at t0, per gap (G, 3).
 
-    With mean readings ``rest`` (3,): from the last reading before t0 farther than the gap from
-    it (a backlash's contact side changes only when the motor comes back by more than its width);
-    a joint that did not move that far keeps ``previous`` (G, 3). The joint states show the
-    motion through every pose visited, measured or not.
+    With mean readings ``rest`` (3,): from the last reading in [since, t0) farther than the gap
+    from it (a backlash's contact side changes only when the motor comes back by more than its
+    width); a joint that did not move that far keeps ``previous`` (G, 3), the signs of the rest
+    before, which started at ``since``. The joint states show the motion through every pose
+    visited, measured or not.
     """
-    before = Theta[:np.searchsorted(t_joint, t0)]
+    before = Theta[np.searchsorted(t_joint, since):np.searchsorted(t_joint, t0)]
     out = np.array(previous, dtype=float)
     for j in range(3):
         dist = np.abs(before[:, j] - rest[j])
@@ -509,7 +510,7 @@ def average(rec, windows, params, notes):
     camera = frame_noise([x[_provisional(x)] for x in spheres], z, np.full(3, SPHERE_FLOOR ** 2))
     joints = frame_noise(readings, z, q ** 2 / 12, grow=False)
     camera_cov, joint_cov = camera.covariance(z), joints.covariance(z)
-    rows, rejected, total, direction = [], 0, 0, np.ones((len(GAPS), 3))
+    rows, rejected, total, direction, since = [], 0, 0, np.ones((len(GAPS), 3)), -np.inf
     for k, (t0, t1, label) in enumerate(kept_windows):
         keep = known_gate(spheres[k], camera_cov[k], params.alpha)
         keep_T = known_gate(readings[k], joint_cov[k], params.alpha)
@@ -520,7 +521,8 @@ def average(rec, windows, params, notes):
             continue
         rejected, total = rejected + len(keep) - n, total + len(keep)
         th = readings[k][keep_T].mean(axis=0)
-        direction = approach_directions(rec.t_joint, rec.Theta, t0, th, direction)
+        direction = approach_directions(rec.t_joint, rec.Theta, t0, th, direction, since)
+        since = t0
         rows.append((th, np.sqrt(np.diag(joint_cov[k]) / n_T), spheres[k][keep].mean(axis=0),
                      camera_cov[k] / n, 0.5 * (t0 + t1), n, direction))
     notes.append(f'{rejected} of {total} finite camera frames in the rests rejected as outliers')
