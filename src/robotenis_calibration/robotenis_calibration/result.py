@@ -146,6 +146,7 @@ def _floor_text(name, variance):
 def plot_residuals(diagnosis, meas, sphere, stamps, path):
     """Plot the final model's whitened residuals against what they could correlate with (PNG)."""
     from matplotlib.figure import Figure    # no pyplot: no GUI backend, nothing global to close
+    from matplotlib.ticker import MaxNLocator
 
     feats = dg.residual_features(diagnosis.final.model, meas, sphere, stamps)
     shown = ('joint angle', 'motion direction', 'gravity torque', 'image x', 'image y', 'time')
@@ -162,6 +163,9 @@ def plot_residuals(diagnosis, meas, sphere, stamps, path):
                 ax.plot(x, r[:, leg], '.', ms=3, label=f'leg {leg + 1}')
             ax.axhline(0, color='k', lw=0.5)
             ax.set_xlabel(name)
+            # few ticks: each is five artists, and drawing them was most of the plot's time
+            ax.xaxis.set_major_locator(MaxNLocator(4))
+            ax.yaxis.set_major_locator(MaxNLocator(5))
             if col == 0:
                 ax.set_ylabel(f'{label}\nwhitened residual')
     axes[0, 0].legend(fontsize=7)
