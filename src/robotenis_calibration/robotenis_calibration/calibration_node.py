@@ -74,7 +74,8 @@ PARAMETERS = {
     'images_per_pose': (2, 'images kept per rest, as PNG'),
     'move_timeout': (RunnerConfig.move_timeout, 's to come to rest at a pose, else it is skipped'),
     'measure_timeout': (RunnerConfig.measure_timeout,
-                        "s to collect a rest's frames before the pose is skipped"),
+                        "s a rest may take beyond its frames' own time (at the detections' "
+                        'rate) before the pose is skipped'),
 }
 
 

@@ -46,7 +46,8 @@ class RunnerConfig:
     still_range: float = 2.5e-4        # rad
     still_time: float = 0.1            # s of stillness before the settle time starts
     move_timeout: float = 10.0         # s to reach a pose
-    measure_timeout: float = 10.0      # s to collect the frames before the pose is skipped
+    # s a rest may take beyond its frames' own time at the detections' rate before it is skipped
+    measure_timeout: float = 10.0
     no_ball_time: float = 0.5          # s without a single detection: ball not in view, skip
 
 
@@ -72,6 +73,7 @@ class SessionRunner:
         self._t_state = None
         self._window = deque()            # (t, Theta) of the last still_time while moving
         self._rest = None
+        self._measured = [0, 0.0]         # frames and seconds of the rests measured so far
 
     @property
     def fraction(self):
@@ -145,10 +147,10 @@ class SessionRunner:
                                                  ' (ball not in view?)'))
                 self.actions.append(('rest_end', self.index))
                 self._next_pose(t)
-            elif t - self._t_state > c.measure_timeout:
+            elif t - self._t_state > self._measure_limit(t):
                 self.skipped.append((self.index,
                                      f'only {len(self._rest.sphere)} of {c.frames_per_pose} '
-                                     f'detections in {c.measure_timeout:.0f} s'
+                                     f'detections in {t - self._t_state:.0f} s'
                                      ' (ball not in view?)'))
                 self.actions.append(('rest_end', self.index))
                 self._next_pose(t)
@@ -168,8 +170,24 @@ class SessionRunner:
         self.actions.append(('done', None))
         return True
 
+    def _measure_limit(self, t):
+        """
+        Return how long (s) a rest may measure: its frames' own time, plus measure_timeout.
+
+        The frames' time is at the detections' rate over the rests measured so far (the camera's
+        and the detector's, whatever they are), or before any, over this rest's own.
+        """
+        frames, seconds = self._measured
+        if not frames:
+            frames, seconds = len(self._rest.sphere), t - self._t_state
+        if not frames or seconds <= 0:
+            return self.config.measure_timeout
+        return self.config.measure_timeout + self.config.frames_per_pose * seconds / frames
+
     def _finish_rest(self, t):
         self._rest.end = t
+        self._measured[0] += len(self._rest.sphere)
+        self._measured[1] += t - self._rest.start
         self.rests.append(self._rest)
         self.actions.append(('rest_end', self.index))
         remaining = len(self.poses) - self.index - 1

@@ -7,13 +7,13 @@ from robotenis_calibration.session_runner import DONE, MEASURING, RunnerConfig, 
 
 
 def drive(runner, visible, dt=0.001, t_end=30.0, seed=0, joints_until=math.inf,
-          detector_until=math.inf):
+          detector_until=math.inf, frame_ms=8):
     """
     Drive ``runner`` with a fake robot that moves to each goal in 0.3 s.
 
     Its readings are quantised with the simulator's count and noise; the camera sees the ball at
-    120 Hz when visible. The joint states stop at ``joints_until``, the detections at
-    ``detector_until`` (s).
+    120 Hz (a frame every ``frame_ms``) when visible. The joint states stop at ``joints_until``,
+    the detections at ``detector_until`` (s).
     """
     rng = np.random.default_rng(seed)
     q = 2 * np.pi / 163840
@@ -28,7 +28,7 @@ def drive(runner, visible, dt=0.001, t_end=30.0, seed=0, joints_until=math.inf,
         Theta = start + (target - start) * min(1.0, (t - goal_time) / 0.3)
         if t < joints_until:
             runner.joint_state(t, np.round((Theta + rng.normal(scale=2e-5, size=3)) / q) * q)
-        if visible(runner.index) and round(t * 1000) % 8 == 0 and t < detector_until:
+        if visible(runner.index) and round(t * 1000) % frame_ms == 0 and t < detector_until:
             runner.detection(t, np.array([0.0, 0.0, 0.3]) + 1e-5 * runner.index, np.eye(3) * 1e-10)
         runner.tick(t)
         t += dt
@@ -59,6 +59,25 @@ def test_a_pose_without_the_ball_is_skipped_with_a_reason():
     assert [r.index for r in runner.rests] == [0, 2]
     assert runner.skipped[0][0] == 1 and 'ball not in view' in runner.skipped[0][1]
     assert runner.fraction == 1.0
+
+
+def test_a_slow_camera_gets_the_time_its_frames_need():
+    """
+    50 frames at 5 Hz take 10 s: longer than measure_timeout, which is time beyond the frames'.
+
+    A rest whose detections then stop is skipped once that extra time is over.
+    """
+    poses = np.array([[0.1, 0, 1.0], [0.2, 0, 1.0], [0.3, 0, 1.0]])
+    config = RunnerConfig(frames_per_pose=50, settle_time=0.1, measure_timeout=2.0)
+    runner = SessionRunner(poses, config)
+    actions = drive(runner, lambda k: True, t_end=60.0, frame_ms=200, detector_until=23.0)
+    assert [r.index for r in runner.rests] == [0, 1]
+    assert all(len(r.sphere) == 50 for r in runner.rests)
+    assert runner.skipped[0][0] == 2 and 'only' in runner.skipped[0][1]
+    start = next(t for t, a in actions if a == ('rest_start', 2))
+    end = next(t for t, a in actions if a == ('rest_end', 2))
+    own = config.frames_per_pose * np.mean([r.end - r.start for r in runner.rests]) / 50
+    assert abs(end - start - (config.measure_timeout + own)) < 0.01
 
 
 def test_no_measurement_while_moving():
