@@ -100,17 +100,20 @@ def calibrate_session(session, settings=Settings(), progress=None):
         raise CalibrationError(f'only {len(session)} usable rests in the session; at least '
                                f'{MIN_POSES} are needed')
     d, meas = _loop(session, settings, progress)
-    # the sides were first taken from any reversal; with a gap found, only a reversal longer
-    # than it moves the contact (an overshoot at a move's end does not). Sides taken wrong make
-    # the gap look smaller, so sides and gap are found in turn until the sides stay.
+    # the sides were first taken from reversals beyond a coarse gear's gap; with a gap found,
+    # only a reversal longer than it moves the contact (an overshoot at a move's end does not).
+    # Sides taken wrong make the gap look smaller, so sides and gap are found in turn until the
+    # sides stay (or come back to sides already tried: a joint whose reversals straddle the gap)
+    tried = [session.direction]
     for _ in range(SIDE_ROUNDS):
         if 'backlash' not in d.final.model.effects:
             break
         width = d.final.model.effects['backlash']
         sided = session.with_backlash(width)
-        changed = int(np.sum(sided.direction != session.direction))
-        if not changed:
+        if any(np.array_equal(sided.direction, seen) for seen in tried):
             break
+        tried.append(sided.direction)
+        changed = int(np.sum(sided.direction != session.direction))
         if progress:
             progress(f'backlash {np.round(width * 1e3, 3)} mrad: {changed} of '
                      f'{session.direction.size} joint sides re-derived from motions longer than '
