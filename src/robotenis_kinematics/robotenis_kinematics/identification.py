@@ -408,3 +408,37 @@ def cramer_rao(true_model, meas, names=PAPER_PARAMETERS):
     """Cramer-Rao bound (J_w^T J_w)^-1 of the parameters at the true model for this pose design."""
     _, J_w = whitened_problem(true_model, meas, names)
     return np.linalg.inv(J_w.T @ J_w)
+
+
+def predicted_positions(model, Theta, direction):
+    """Return the effector positions (K, 3) the model predicts for readings Theta (rad)."""
+    joint_fx = {k: v for k, v in model.effects.items() if effects.is_joint_effect(k)}
+    P = None
+    for _ in range(3 if 'gravity_compliance' in joint_fx else 1):
+        theta = effects.model_joint_angles(model.desc, joint_fx, Theta, direction, P)[0]
+        P = delta.forward(model.desc, theta)
+    return P
+
+
+def fk_covariance(result, Theta, direction=None):
+    """
+    Return the covariance (K, 3, 3) of the effector positions a fit predicts for readings Theta.
+
+    At fixed readings the loop closure Gamma(P, U) = 0 (eq. 4) gives dP/dU = -(dGamma/dP)^-1
+    dGamma/dU (implicit function); the parameters of the camera side (P0, the hand-eye rotation,
+    the camera field) do not move the forward kinematics. ``direction``: each joint's motion into
+    each pose (default from the order of Theta). What the fit cannot tell -- a near-gauge of the
+    geometry, the workspace far from the poses measured -- shows here without any truth.
+    """
+    model = result.model
+    Theta = np.atleast_2d(np.asarray(Theta, dtype=float))
+    direction = effects.motion_direction(Theta) if direction is None else direction
+    P = predicted_positions(model, Theta, direction)
+    at = Measurements(Theta, P - model.P0, np.zeros(3), np.zeros((3, 3)), direction)
+    parts = partials(model, at)
+    J = observation_matrix(model, at, result.names, parts).reshape(3, len(Theta), -1)
+    camera_side = [n.startswith(('P0', 'hand_eye_rotation')) or effects.is_camera_term(n[:-1])
+                   for n in result.names]
+    J[:, :, camera_side] = 0.0
+    dP_dU = -np.linalg.solve(parts['P'], J.transpose(1, 0, 2))        # (K, 3, p)
+    return np.einsum('kip,pq,kjq->kij', dP_dU, result.covariance, dP_dU)

@@ -1,6 +1,6 @@
 import numpy as np
 import pytest
-from robotenis_kinematics import effects, observability, synthetic, workspace
+from robotenis_kinematics import delta, effects, observability, synthetic, workspace
 from robotenis_kinematics import identification as idf
 from scipy import stats
 
@@ -54,6 +54,26 @@ def test_errors_agree_with_the_covariance_over_50_seeds(nominal, table1, design)
     n = seeds * len(truth)
     assert stats.chi2.ppf(LEVEL / 2, n) < mahalanobis < stats.chi2.ppf(1 - LEVEL / 2, n)
     assert stats.chi2.ppf(LEVEL / 2, dof) < residual < stats.chi2.ppf(1 - LEVEL / 2, dof)
+
+
+def test_fk_covariance_predicts_the_error_far_from_the_poses_measured(nominal, table1, design):
+    """
+    Fit 40 poses of one half of the workspace; predict a pose of the other half.
+
+    Its error against the truth, weighted by fk_covariance, summed over 40 seeds ~ chi2(3 * 40).
+    """
+    near = design[design[:, 0] > 0.05][:40]
+    far = design[design[:, 0] < -0.1][:1]
+    Theta_far = delta.inverse(table1, far) - table1.theta0
+    total, seeds = 0.0, 40
+    for seed in range(seeds):
+        meas = synthetic.measure(table1, near, rng=np.random.default_rng(2000 + seed))
+        result = idf.identify(idf.initial_model(nominal, meas), meas)
+        e = idf.predicted_positions(result.model, Theta_far, np.ones((1, 3)))[0] - far[0]
+        C = idf.fk_covariance(result, Theta_far)[0]
+        total += e @ np.linalg.solve(C, e)
+    n = 3 * seeds
+    assert stats.chi2.ppf(LEVEL / 2, n) < total < stats.chi2.ppf(1 - LEVEL / 2, n), total
 
 
 def test_covariance_at_the_truth_is_the_cramer_rao_bound(nominal, table1, design):
