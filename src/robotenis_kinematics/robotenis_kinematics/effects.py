@@ -307,12 +307,21 @@ def joint_angles(desc, Theta):
     """
     Return the arm angles (N, 3) for resolver increments (N, 3) visited in this order.
 
-    Every joint effect the description holds is applied. Compliance depends on the pose, so it is
-    iterated with FK (the sag is tiny: two passes agree to far below a resolver count).
+    Every joint effect the description holds is applied (``arm_angles``), with each joint's
+    motion direction from the order of Theta.
     """
     Theta = np.asarray(Theta, dtype=float).reshape(-1, 3)
-    fx = parameters(desc)
-    direction = motion_direction(Theta)
+    return arm_angles(desc, parameters(desc), Theta, motion_direction(Theta))
+
+
+def arm_angles(desc, fx, Theta, direction):
+    """
+    Return the arm angles (N, 3) for readings Theta (N, 3) under the joint effects of ``fx``.
+
+    ``direction`` (N, 3): each joint's motion into each pose. Compliance depends on the pose, so
+    it is iterated with FK (the sag is tiny: two passes agree to far below a resolver count);
+    effects of the camera side in ``fx`` are ignored.
+    """
     joint_fx = {k: v for k, v in fx.items() if is_joint_effect(k) and k != 'gravity_compliance'}
     theta, _ = model_joint_angles(desc, joint_fx, Theta, direction, None)
     if 'gravity_compliance' not in fx:

@@ -412,12 +412,8 @@ def cramer_rao(true_model, meas, names=PAPER_PARAMETERS):
 
 def predicted_positions(model, Theta, direction):
     """Return the effector positions (K, 3) the model predicts for readings Theta (rad)."""
-    joint_fx = {k: v for k, v in model.effects.items() if effects.is_joint_effect(k)}
-    P = None
-    for _ in range(3 if 'gravity_compliance' in joint_fx else 1):
-        theta = effects.model_joint_angles(model.desc, joint_fx, Theta, direction, P)[0]
-        P = delta.forward(model.desc, theta)
-    return P
+    return delta.forward(model.desc, effects.arm_angles(model.desc, model.effects, Theta,
+                                                        direction))
 
 
 def fk_covariance(result, Theta, direction=None):

@@ -76,6 +76,21 @@ def test_fk_covariance_predicts_the_error_far_from_the_poses_measured(nominal, t
     assert stats.chi2.ppf(LEVEL / 2, n) < total < stats.chi2.ppf(1 - LEVEL / 2, n), total
 
 
+def test_predicted_positions_apply_the_joint_effects_as_fk_does(table1, design):
+    """A model's joint effects, compliance among them, move its FK as the description's do."""
+    fx = {'backlash': np.array([1e-3, 6e-4, 8e-4]), 'gravity_compliance': np.full(3, 2e-4)}
+    desc = table1.copy(effects=[{'name': name, effects.PARAMETERS[name][0]: list(v)}
+                                for name, v in fx.items()])
+    Theta = delta.inverse(table1, design[:30]) - table1.theta0
+    model = idf.Model(table1.copy(), np.zeros(3), fx)
+    expected = delta.forward(desc, effects.joint_angles(desc, Theta))
+    P = idf.predicted_positions(model, Theta, effects.motion_direction(Theta))
+    assert np.abs(P - expected).max() < 1e-12
+    assert np.all(np.isfinite(idf.fk_covariance(
+        idf.Result(model, ('a1', 'gravity_compliance1'), np.zeros(2), np.eye(2) * 1e-8, 0.0, 0, 0,
+                   True), Theta)))
+
+
 def test_covariance_at_the_truth_is_the_cramer_rao_bound(nominal, table1, design):
     meas = synthetic.measure(table1, design, rng=np.random.default_rng(5))
     result = idf.identify(idf.initial_model(nominal, meas), meas)
