@@ -37,13 +37,15 @@ compete) and needs three tests to pass, so on data with no effect the loop claim
 than ALPHA of the sessions.
 """
 from dataclasses import dataclass, field
+import functools
 
 import numpy as np
-from robotenis_kinematics import delta, effects, variance
+from robotenis_kinematics import delta, effects, variance, workspace
 from robotenis_kinematics import identification as idf
 from scipy import stats
 
 ALPHA = 0.01
+WORKSPACE_POSES = 200    # boundary poses over which the fit's FK uncertainty is reported
 NAMED = ('joint_scale', 'base_geometry', 'hand_eye_rotation', 'backlash', 'gravity_compliance')
 GENERIC = ('joint_harmonics', 'camera_field')
 CANDIDATES = NAMED + GENERIC
@@ -129,6 +131,23 @@ class Diagnosis:
     fallback: list = field(default_factory=list)
     sizes: dict = field(default_factory=dict)     # generic effect -> orders or parameters kept
     correlates: dict = field(default_factory=dict)  # generic effect -> generic_correlations
+
+    @functools.cached_property
+    def workspace_fk_std_mm(self):
+        """
+        Return the RMS and largest standard deviation (mm) of the final fit's FK, workspace-wide.
+
+        At WORKSPACE_POSES boundary poses of the fitted geometry (a fixed draw), from the fit's
+        own covariance (identification.fk_covariance): how far from the poses it measured the
+        calibration can be trusted, which needs no truth. A session whose poses cover little of
+        the workspace, or whose rests err by more than their frames show, reads large here
+        however small its held-out error.
+        """
+        desc = self.final.model.desc
+        P = workspace.boundary_poses(desc, WORKSPACE_POSES, np.random.default_rng(0))
+        C = idf.fk_covariance(self.final, delta.inverse(desc, P) - desc.theta0)
+        sd = np.sqrt(np.trace(C, axis1=1, axis2=2))
+        return float(np.sqrt(np.mean(sd ** 2)) * 1e3), float(sd.max() * 1e3)
 
 
 def with_candidate(model, name, size=None):

@@ -48,7 +48,7 @@ import functools
 
 import numpy as np
 from robotenis_calibration import bag_io, cdr_arrays
-from robotenis_calibration.session import Session
+from robotenis_calibration.session import nearest_gap, Session
 from robotenis_kinematics import description
 from robotenis_ros.convert import joint_vector
 from robotenis_ros.names import JOINTS
@@ -461,7 +461,7 @@ MOVED = 2e-4
 GAPS = MOVED * 1.25 ** np.arange(20)     # rad: reversals a side may need, 0.2 to 14 mrad
 # the sides before any backlash is known: a reversal shorter than a coarse gear's backlash (about
 # 10 arcmin) is taken for a controller's overshoot, which leaves the contact where it was
-START_GAP = int(np.argmin(np.abs(np.log(GAPS / 3e-3))))
+START_GAP = int(nearest_gap(GAPS, 3e-3)[0])
 
 
 def approach_directions(t_joint, Theta, t0, rest, previous, since=-np.inf, gaps=GAPS):

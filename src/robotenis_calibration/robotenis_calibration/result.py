@@ -8,12 +8,9 @@ numbers), so ``./robotenis fk --model RESULT.yaml`` and the motion controller ca
 import numpy as np
 
 from robotenis_calibration import diagnosis as dg
-from robotenis_kinematics import delta, workspace
 from robotenis_kinematics import effects as fx
 from robotenis_kinematics import identification as idf
 from robotenis_kinematics.identification import LEG_PARAMETERS
-
-WORKSPACE_POSES = 200    # boundary poses over which the fit's FK uncertainty is reported
 
 
 def _std(result, name):
@@ -77,23 +74,6 @@ def _parameters(result):
     return rows
 
 
-def workspace_fk_std_mm(diagnosis):
-    """
-    Return the RMS and the largest standard deviation (mm) of the final fit's FK, workspace-wide.
-
-    At WORKSPACE_POSES boundary poses of the fitted geometry (a fixed draw), from the fit's own
-    covariance (identification.fk_covariance): how far from the poses it measured the calibration
-    can be trusted, which needs no truth. A session whose poses cover little of the workspace, or
-    whose rests err by more than their frames show, reads large here however small its held-out
-    error.
-    """
-    model = diagnosis.final.model
-    P = workspace.boundary_poses(model.desc, WORKSPACE_POSES, np.random.default_rng(0))
-    C = idf.fk_covariance(diagnosis.final, delta.inverse(model.desc, P) - model.desc.theta0)
-    sd = np.sqrt(np.trace(C, axis1=1, axis2=2))
-    return float(np.sqrt(np.mean(sd ** 2)) * 1e3), float(sd.max() * 1e3)
-
-
 def report(diagnosis):
     """Return the numbers of the residual loop as plain data (SI units; errors in mm as named)."""
     steps = []
@@ -108,11 +88,11 @@ def report(diagnosis):
             'likelihood_ratio_p': step.lr_p_value, 'holdout_p': step.holdout_p_value,
             'generic_adds_p': step.generic_p_value,
         })
-    rms, largest = workspace_fk_std_mm(diagnosis)
+    rms, largest = diagnosis.workspace_fk_std_mm
     return {
         'poses': {'train': int(len(diagnosis.train)), 'holdout': int(len(diagnosis.holdout))},
         'holdout_rms_error_mm': dict(diagnosis.errors_mm),
-        'workspace_fk_std_mm': {'rms': rms, 'largest': largest, 'poses': WORKSPACE_POSES},
+        'workspace_fk_std_mm': {'rms': rms, 'largest': largest, 'poses': dg.WORKSPACE_POSES},
         'holdout_chi2': dict(diagnosis.holdout_chi2),
         'holdout_test': dict(diagnosis.size_test),
         'noise_floor': diagnosis.floor.as_dict() if diagnosis.floor else None,
@@ -146,9 +126,9 @@ def summary(diagnosis):
                           for t in step.tests)
         lines.append(f'  score tests: {tests}')
         lines.append(f'    -> {step.chosen}: {step.reason}')
-    rms, largest = workspace_fk_std_mm(diagnosis)
+    rms, largest = diagnosis.workspace_fk_std_mm
     lines.append(f'FK standard deviation over the workspace, from the fit: {rms:.3f} mm RMS, '
-                 f'{largest:.3f} mm at most ({WORKSPACE_POSES} boundary poses)')
+                 f'{largest:.3f} mm at most ({dg.WORKSPACE_POSES} boundary poses)')
     size = diagnosis.size_test
     lines.append(f"held-out poses: chi2 {size['chi2']:.1f} for {size['dof']} dof"
                  f" (p = {size['p_value']:.3g}) under the final model and the rests' floor")

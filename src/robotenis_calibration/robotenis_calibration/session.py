@@ -15,6 +15,11 @@ from robotenis_kinematics import effects
 from robotenis_kinematics.identification import Measurements
 
 
+def nearest_gap(gaps, width):
+    """Return the index in ``gaps`` (G,) nearest in ratio to each of ``width`` (n,) rad."""
+    return np.argmin(np.abs(np.log(gaps)[:, None] - np.log(np.atleast_1d(width))), axis=0)
+
+
 @dataclass
 class Session:
     """
@@ -84,8 +89,7 @@ class Session:
         """
         if self.approach is None:
             return self
-        g = np.abs(np.log(self.gaps)[:, None] - np.log(np.maximum(np.abs(width), self.gaps[0])))
-        pick = np.argmin(g, axis=0)
+        pick = nearest_gap(self.gaps, np.maximum(np.abs(width), self.gaps[0]))
         direction = self.approach[:, pick, np.arange(3)]
         return dataclasses.replace(self, direction=direction)
 

@@ -310,16 +310,16 @@ def image_topic(spec):
     return '/camera/image_raw/compressed' if spec.compressed_images else '/camera/image_raw'
 
 
-def _joint_states(t0, t1, Theta, times, spec, msgs, rngs):
+def _joint_states(t0, t1, Theta, times, overshoot, spec, msgs, rngs):
     """
     Return (time, topic, message) of joint states in [t0, t1): quantised noisy readings, corrupted.
 
-    ``rngs``: generators of the noise and of the corruption (separate, so that a corrupted bag has
-    the noise of the clean one).
+    ``overshoot``: each joint's past each rest (K, 3, ``overshoots``); ``rngs``: generators of the
+    noise and of the corruption (separate, so that a corrupted bag has the noise of the clean one).
     """
     rng, bad_rng = rngs
     t = np.arange(np.ceil(t0 * spec.joint_rate), np.ceil(t1 * spec.joint_rate)) / spec.joint_rate
-    raw = (readings(t, Theta, times, overshoots(spec, len(Theta)))
+    raw = (readings(t, Theta, times, overshoot)
            + rng.normal(scale=RESOLVER.noise, size=(len(t), 3)))
     Th = np.round(raw / RESOLVER.resolution) * RESOLVER.resolution
     keep = corrupt(Th, spec, bad_rng, false_offsets=False)
@@ -363,11 +363,13 @@ def _rest(k, times, sphere, spec, msgs, rngs, radius):
 def _segments(declared, Theta, sphere, times, spec, msgs, rngs):
     """Yield lists of (time, topic, message): the idle start, then each move with its rest."""
     robot_description = msgs.types['std_msgs/msg/String'](data=description.dumps(declared))
+    overshoot = overshoots(spec, len(Theta))
     yield [(0.0, '/robot_description', robot_description),
            (0.0, '/camera/camera_info', msgs.camera_info(0.0))] + \
-        _joint_states(0.0, times[0, 0], Theta, times, spec, msgs, rngs)
+        _joint_states(0.0, times[0, 0], Theta, times, overshoot, spec, msgs, rngs)
     for k in range(len(Theta)):
-        yield _joint_states(times[k, 0], times[k, 4], Theta, times, spec, msgs, rngs) + \
+        yield _joint_states(times[k, 0], times[k, 4], Theta, times, overshoot, spec, msgs,
+                            rngs) + \
             _rest(k, times, sphere, spec, msgs, rngs, declared.sphere_radius)
 
 

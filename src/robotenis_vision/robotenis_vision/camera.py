@@ -118,6 +118,15 @@ class Camera:
         """Image pixels (..., 2) to undistorted normalized points (x, y) with the ray (x, y, 1)."""
         return self.undistort(self.to_normalized(uv))
 
+    def apparent_radius(self, centre, radius):
+        """
+        Return a sphere's apparent radius (px): fx R / sqrt(|C|^2 - R^2), the touching cone's.
+
+        ``centre`` (3,) optical frame and ``radius`` in m; the centre must lie outside the sphere.
+        """
+        c = np.asarray(centre, dtype=float)
+        return self.fx * radius / np.sqrt(max(c @ c - radius * radius, 1e-12))
+
     def project(self, points):
         """Optical-frame points (..., 3), m, to distorted pixels (..., 2); Z must be positive."""
         points = np.asarray(points, dtype=float)

@@ -155,8 +155,7 @@ def _same_ball(camera, a, b, R):
     Not by their distance in space: a search's sphere of the wrong size at the same place (the
     highlight's ring, the terminator) is far from the right one in depth, yet the same ball.
     """
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    radius_px = max(camera.fx * R / np.sqrt(max(c @ c - R * R, 1e-12)) for c in (a, b))
+    radius_px = max(camera.apparent_radius(a, R), camera.apparent_radius(b, R))
     return np.linalg.norm(camera.project(a) - camera.project(b)) < radius_px
 
 
@@ -203,7 +202,7 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0):
     """
     if method == 'baseline':
         centre = camera.project(c0)
-        r = camera.fx * radius / np.sqrt(c0 @ c0 - radius * radius)
+        r = camera.apparent_radius(c0, radius)
         return baseline.detect(img, camera, radius, centre, r)
     if method == 'model':
         if blur == BLUR_GUESS:
@@ -327,7 +326,7 @@ def _window(camera, c, R, sigma):
     Rounded to the sample step, so that the profile designs repeat (and are cached).
     """
     half = float(np.clip(3 * sigma + 2.0, 3.5, 6.0))
-    r_px = camera.fx * R / np.sqrt(c @ c - R * R)
+    r_px = camera.apparent_radius(c, R)
     half = min(half, max(2.5, 0.3 * r_px))
     return float(np.round(half / edges.STEP) * edges.STEP)
 

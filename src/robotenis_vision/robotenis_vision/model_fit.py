@@ -428,7 +428,7 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
     """
     c = np.asarray(c0, dtype=float).copy()
     s = float(np.clip(blur0, *BLUR_RANGE))
-    r_px = camera.fx * R / np.sqrt(max(c @ c - R * R, 1e-12))
+    r_px = camera.apparent_radius(c, R)
     outer = min(float(np.clip(3 * s + 2.0, 3.5, 6.0)), max(2.5, 0.3 * r_px))
     ann = annulus(img, camera, c, R, outer, max(2.5, INNER * r_px))
     y, w0 = linearise(ann.values, gamma)
@@ -482,7 +482,7 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
         raise DetectionError('the model fit did not converge')
     # the outline must have stayed within the annulus it was fitted on
     moved = np.linalg.norm(camera.project(c) - camera.project(c0))
-    grown = abs(camera.fx * R / np.sqrt(c @ c - R * R) - r_px)
+    grown = abs(camera.apparent_radius(c, R) - r_px)
     if moved > outer or grown > outer:
         raise DetectionError(f'the outline is not where the fit started ({moved:.1f} px off, '
                              f'radius {grown:.1f} px off)')
