@@ -6,23 +6,29 @@ calibration node records it) and the simulator's truth file it ran with, and pri
 
 * the rests against the truth: each rest's averaged sphere centre minus where the truth puts the
   ball for the rest's readings (its true arm angles, backlash side from the readings' motion);
-* the detector alone: the ball rendered at those true positions with the hand camera's defaults
-  and detected, per method (what the detector gets wrong at each pose, whatever the chain does);
+* the detector alone: the ball rendered without sensor noise at those true positions with the
+  hand camera's defaults and detected, per method: the detector's bias at each pose, the part of
+  a rest's error that averaging its frames does not remove (study.detector_bias), and what is left
+  of the rests' error without it;
 * the backlash side: the same difference when each joint's side is the one that fits best (a
   side the readings got wrong shows as a large drop);
-* with RESULT, its FK error against the truth over boundary poses of the whole workspace.
+* the bag calibrated as recorded and with each rest's detector bias taken out (what the chain
+  would give with an unbiased detector): the effects claimed and the FK error against the truth
+  at the session's rests (RMS, and less its common offset, which the hand camera barely sees)
+  and over boundary poses of the whole workspace;
+* with RESULT, its FK error against the truth over the whole workspace.
 """
 import argparse
+import dataclasses
 import itertools
 import sys
 
 import numpy as np
-from robotenis_calibration import rests
+from robotenis_calibration import pipeline, rests, result
 from robotenis_kinematics import delta, description, effects, workspace
-from robotenis_sim import camera_model, static_session
+from robotenis_sim import static_session
 from robotenis_sim import truth as sim_truth
-from robotenis_vision import camera as vision_camera
-from robotenis_vision import detector
+from robotenis_validation.study import detector_bias
 
 METHODS = ('conic', 'model')
 
@@ -37,20 +43,6 @@ def true_centres(truth, Theta, direction):
 def true_sphere(truth, Theta, direction):
     """Return where the truth's camera measures the ball (K, 3) for rests' readings."""
     return truth.camera_reading(true_centres(truth, Theta, direction))
-
-
-def detector_errors(truth, Theta, direction, method, rng):
-    """Return detection minus truth (n, 3) of renders at the rests' true positions (m)."""
-    C = true_centres(truth, Theta, direction)
-    camera, R = vision_camera.default(), truth.geometry.sphere_radius
-    out = []
-    for c in C:
-        try:
-            out.append(detector.detect(camera_model.render(camera, c, R, rng), camera, R,
-                                       method).position - c)
-        except detector.DetectionError:
-            continue  # a frame the detector refuses is not an error of it
-    return np.array(out)
 
 
 def best_sides(truth, session):
@@ -76,6 +68,39 @@ def workspace_error_mm(desc, truth, n=500, seed=900):
     return float(np.sqrt(np.mean(np.sum((P - P_true) ** 2, axis=1))) * 1e3)
 
 
+def rest_error_mm(desc, truth, session):
+    """
+    Return the FK error (mm) of a description at a session's rests against the truth.
+
+    (RMS 3D error, the same less its mean over the rests): the second leaves out the common
+    offset along which a hand camera's incremental measurements barely pin the robot.
+    """
+    fx = effects.parameters(desc)
+    P = delta.forward(desc, effects.arm_angles(desc, fx, session.Theta, session.direction))
+    arm = truth.arm_angles(truth.motor_from_reading(session.Theta), session.direction)
+    e = (P - delta.forward(truth.geometry, arm)) * 1e3
+    rms = float(np.sqrt(np.mean(np.sum(e ** 2, axis=1))))
+    return rms, float(np.sqrt(np.mean(np.sum((e - e.mean(axis=0)) ** 2, axis=1))))
+
+
+def without_bias(session, bias):
+    """Return the session with each rest's detector bias (K, 3) taken out (NaN rows dropped)."""
+    ok = np.flatnonzero(np.all(np.isfinite(bias), axis=1))
+    kept = session.subset(ok)
+    return dataclasses.replace(kept, sphere=kept.sphere - bias[ok])
+
+
+def calibration_line(label, session, truth):
+    """Calibrate a session as `calibrate` does and score it against the truth: one line."""
+    d, _ = pipeline.calibrate_session(session)
+    desc = result.calibrated_description(d, session.description)
+    at_rests, less_offset = rest_error_mm(desc, truth, session)
+    return (f'{label}: claimed {", ".join(d.final.model.effects) or "nothing"}; held-out '
+            f'{d.errors_mm["final"]:.3f} mm (camera); FK against the truth at the rests '
+            f'{at_rests:.3f} mm ({less_offset:.3f} less its common offset), over the workspace '
+            f'{workspace_error_mm(desc, truth):.3f} mm')
+
+
 def _line(label, e):
     return (f'{label:46s} mean {np.round(e.mean(axis=0) * 1e3, 3)} std '
             f'{np.round(e.std(axis=0) * 1e3, 3)} mm ({len(e)})')
@@ -90,14 +115,19 @@ def main(argv=None):
     truth = sim_truth.load(args.truth)
     session, _ = rests.load_session(args.bag)
     print('optical x, y, z:')
-    print(_line('rests minus truth', session.sphere - true_sphere(truth, session.Theta,
-                                                                  session.direction)))
+    error = session.sphere - true_sphere(truth, session.Theta, session.direction)
+    print(_line('rests minus truth', error))
+    C = true_centres(truth, session.Theta, session.direction)
+    bias = {m: detector_bias(C, truth.geometry.sphere_radius, m) for m in METHODS}
     for method in METHODS:
-        e = detector_errors(truth, session.Theta, session.direction, method,
-                            np.random.default_rng(0))
-        print(_line(f'detector alone ({method}), renders at the rests', e))
+        ok = np.all(np.isfinite(bias[method]), axis=1)
+        print(_line(f'detector bias ({method}), noise-free renders', bias[method][ok]))
+        print(_line(f'rests minus truth minus the {method} bias', (error - bias[method])[ok]))
     e, flipped = best_sides(truth, session)
     print(_line(f'rests, best backlash sides ({flipped} of {3 * len(session)} flipped)', e))
+    print(calibration_line('calibrated as recorded', session, truth))
+    print(calibration_line('calibrated with the model bias taken out',
+                           without_bias(session, bias['model']), truth))
     if args.result:
         print(f'FK of {args.result} against the truth over 500 boundary poses: '
               f'{workspace_error_mm(description.load(args.result), truth):.3f} mm '

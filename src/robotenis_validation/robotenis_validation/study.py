@@ -3,21 +3,53 @@ import numpy as np
 from robotenis_calibration import diagnosis, poses
 from robotenis_calibration.session import Session
 from robotenis_kinematics import synthetic
-from robotenis_sim import static_session
+from robotenis_sim import camera_model, static_session
 from robotenis_sim.scenarios import BALL_GUESS_ERROR
+from robotenis_vision import camera as vision_camera
+from robotenis_vision import detector
 
 
-def static_run(truth, declared, n, seed, selection='boundary'):
+def detector_bias(C, radius, method='model', camera=None):
+    """
+    Return what the detector gets wrong (K, 3), m, for balls at true centres C (K, 3, optical).
+
+    Each ball is rendered by the hand camera's renderer without sensor noise (its defaults
+    otherwise) and measured: the error left is the detector's bias at that pose, the part that
+    averaging frames at a rest does not remove. A refused image gives a row of NaN.
+    """
+    camera = camera or vision_camera.default()
+    rng = np.random.default_rng(0)
+    out = np.full((len(C), 3), np.nan)
+    for k, c in enumerate(np.asarray(C, dtype=float)):
+        image = camera_model.render(camera, c, radius, rng, noise_sigma=0.0)
+        try:
+            out[k] = detector.detect(image, camera, radius, method).position - c
+        except detector.DetectionError:
+            continue
+    return out
+
+
+def static_run(truth, declared, n, seed, selection='boundary', guess_error=BALL_GUESS_ERROR,
+               images=None):
     """
     Run a static session of ``n`` planned poses on ``truth`` and the residual loop on it.
 
     Returns (session, measurements, diagnosis). The planner knows only the declared description
-    and a guess of the ball position that is off by scenarios.BALL_GUESS_ERROR.
+    and a guess of the ball position that is off by ``guess_error`` (m). ``images``: a detector
+    method; each rest then also carries the detector's bias at its true pose (detector_bias), as
+    a session through rendered images would without its dynamics, and rests whose image the
+    detector refuses are dropped.
     """
     rng = np.random.default_rng(seed)
-    P = poses.select(selection, declared, truth.sphere_position + BALL_GUESS_ERROR, n, rng)
-    Theta, sigma, sphere, cov, _ = static_session.run(truth, declared, P, synthetic.NoiseModel(),
-                                                      rng)
+    P = poses.select(selection, declared, truth.sphere_position + guess_error, n, rng)
+    Theta, sigma, sphere, cov, kept = static_session.run(truth, declared, P,
+                                                         synthetic.NoiseModel(), rng)
+    if images:
+        C = static_session.sphere_in_camera(truth, static_session.rest_positions(
+            truth, declared, P[kept])[1])
+        bias = detector_bias(C, truth.geometry.sphere_radius, images)
+        ok = np.all(np.isfinite(bias), axis=1)
+        Theta, sigma, sphere, cov = Theta[ok], sigma[ok], sphere[ok] + bias[ok], cov[ok]
     s = Session(declared, Theta, sigma, sphere, cov, 8.0 * np.arange(len(Theta)))
     meas = s.measurements()
     return s, meas, diagnosis.run(declared, meas, s.sphere, s.stamps, seed=seed)

@@ -1,9 +1,12 @@
 """Scoring a recorded session link by link against the truth it ran with."""
 import numpy as np
 from robotenis_calibration import rests
-from robotenis_sim import scenarios, session_bag
+from robotenis_kinematics import description
+from robotenis_sim import camera_model, scenarios, session_bag
 from robotenis_sim import truth as sim_truth
-from robotenis_validation import live_links
+from robotenis_validation import live_links, study
+from robotenis_vision import camera as vision_camera
+from robotenis_vision import detector
 from scipy import stats
 
 
@@ -18,3 +21,41 @@ def test_a_simulated_bags_rests_meet_the_truth_within_their_noise(tmp_path):
     chi2 = float(np.einsum('ki,kij,kj->', e, np.linalg.inv(session.sphere_cov), e))
     dof = 3 * len(e)
     assert stats.chi2.ppf(0.005, dof) < chi2 < stats.chi2.ppf(0.995, dof)
+
+
+def test_the_noise_free_bias_is_what_averaging_frames_leaves():
+    """detector_bias at a pose is the mean error of noisy frames there, to the mean's noise."""
+    camera, R = vision_camera.default(), 0.019
+    C = np.array([[0.02, 0.01, 0.30], [0.21, 0.0, 0.30]])
+    bias = study.detector_bias(C, R)
+    assert np.all(np.isfinite(bias[0])) and np.all(np.isnan(bias[1]))   # the second is cut
+    rng = np.random.default_rng(3)
+    dets = [detector.detect(camera_model.render(camera, C[0], R, rng), camera, R)
+            for _ in range(24)]
+    e = np.mean([d.position for d in dets], axis=0) - C[0] - bias[0]
+    cov = np.cov([d.position for d in dets], rowvar=False) / len(dets)
+    assert e @ np.linalg.solve(cov, e) < stats.f.ppf(0.999, 3, len(dets) - 3) * 3 * (
+        len(dets) - 1) / (len(dets) - 3)
+
+
+def test_the_truths_own_geometry_has_no_fk_error_at_the_rests(tmp_path):
+    """rest_error_mm: zero for the truth's geometry; the nominal's, less its offset, is smaller."""
+    bag = session_bag.write(tmp_path / 'bag', session_bag.BagSpec(poses=30, seed=5))
+    truth = sim_truth.load()
+    session, _ = rests.load_session(bag.path)
+    assert live_links.rest_error_mm(truth.geometry, truth, session) == (0.0, 0.0)
+    rms, less_offset = live_links.rest_error_mm(description.nominal(), truth, session)
+    assert 0 < less_offset < rms
+
+
+def test_taking_the_bias_out_keeps_the_rests_it_measured(tmp_path):
+    """without_bias: rests with a bias lose it; rests the detector refused (NaN) are dropped."""
+    bag = session_bag.write(tmp_path / 'bag', session_bag.BagSpec(poses=25, seed=6))
+    session, _ = rests.load_session(bag.path)
+    bias = np.random.default_rng(1).normal(scale=1e-4, size=(len(session), 3))
+    bias[3] = np.nan
+    out = live_links.without_bias(session, bias)
+    keep = np.delete(np.arange(len(session)), 3)
+    assert len(out) == len(session) - 1
+    np.testing.assert_array_equal(out.sphere, session.sphere[keep] - bias[keep])
+    np.testing.assert_array_equal(out.Theta, session.Theta[keep])
