@@ -171,7 +171,8 @@ class MotionControllerNode(Node):
 
 
 def main(args=None):
-    return spin(MotionControllerNode, 'motion_controller', (DescriptionError,), args)
+    return spin(MotionControllerNode, 'motion_controller', (DescriptionError,), args,
+                events=True)
 
 
 if __name__ == '__main__':

@@ -122,7 +122,7 @@ class PbvsTrackerNode(Node):
 
 
 def main(args=None):
-    return spin(PbvsTrackerNode, 'pbvs_tracker', (DescriptionError,), args)
+    return spin(PbvsTrackerNode, 'pbvs_tracker', (DescriptionError,), args, events=True)
 
 
 if __name__ == '__main__':

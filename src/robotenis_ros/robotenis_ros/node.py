@@ -10,11 +10,15 @@ import sys
 from rcl_interfaces.msg import ParameterDescriptor
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.experimental import EventsExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.task import Future
 
 # A latched topic (the robot description): the last message reaches late subscribers too.
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+# s: the EventsExecutor is spun in slices this long, so that a signal stops it (see spin)
+EVENTS_SLICE = 0.1
 
 
 def declare_parameters(node, table, **defaults):
@@ -31,22 +35,36 @@ def declare_parameters(node, table, **defaults):
     return {name: node.get_parameter(name).value for name in table}
 
 
-def spin(make_node, name, fatal=(ValueError,), args=None, finish=None):
+def spin(make_node, name, fatal=(ValueError,), args=None, finish=None, events=False):
     """
-    Run one node on a SingleThreadedExecutor until Ctrl-C or shutdown; return the exit code.
+    Run one node until Ctrl-C or shutdown; return the exit code.
 
     ``fatal`` errors raised while building the node (a bad parameter, an unreadable file) are
     printed as ``name: message`` and give exit code 2; a stop by signal gives 0, even when it
     interrupts a callback. Shutdown goes in the order rclpy needs:
     executor, ``finish(node)`` (e.g. close a file the node writes), node, context.
+
+    The executor is a SingleThreadedExecutor, or with ``events`` rclpy's EventsExecutor, which
+    takes and dispatches each message in C++: 2-3x less CPU per message (a JointState ping-pong
+    between two processes here: 3600 round trips/s and 170 us of CPU per trip on each side,
+    against 1100-1400/s and 350-490 us). For the nodes a message at 1 kHz wakes (the simulator,
+    the controller in lockstep). It serves no coroutine (async) service callback and no guard
+    condition, and its spin() does not return on SIGINT or SIGTERM: it is spun in slices of
+    EVENTS_SLICE (until a future that never completes, so that a slice runs every callback due
+    in it) while the context is up.
     """
     rclpy.init(args=args)
     node = None
-    executor = SingleThreadedExecutor()
+    executor = EventsExecutor() if events else SingleThreadedExecutor()
     try:
         node = make_node()
         executor.add_node(node)
-        executor.spin()
+        if events:
+            never = Future()
+            while rclpy.ok():
+                executor.spin_until_future_complete(never, timeout_sec=EVENTS_SLICE)
+        else:
+            executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (_rclpy.RCLError, RuntimeError):

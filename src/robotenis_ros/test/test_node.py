@@ -1,4 +1,8 @@
-"""Parameters declared from one table; spinning until a clean stop."""
+"""Parameters declared from one table; spinning until a clean stop, on either executor."""
+import signal
+import subprocess
+import sys
+
 import pytest
 import rclpy
 from rclpy.parameter import Parameter
@@ -35,10 +39,37 @@ def failing_node(shut_down_first):
     return make
 
 
-def test_an_error_after_the_context_was_shut_down_is_a_clean_stop():
-    assert spin(failing_node(True), 'spin_test') == 0
+@pytest.mark.parametrize('events', [False, True])
+def test_an_error_after_the_context_was_shut_down_is_a_clean_stop(events):
+    assert spin(failing_node(True), 'spin_test', events=events) == 0
 
 
-def test_an_error_while_the_context_is_alive_is_not_hidden():
+@pytest.mark.parametrize('events', [False, True])
+def test_an_error_while_the_context_is_alive_is_not_hidden(events):
     with pytest.raises(RuntimeError, match='Unable to convert'):
-        spin(failing_node(False), 'spin_test')
+        spin(failing_node(False), 'spin_test', events=events)
+
+
+SPINNER = """
+import sys, rclpy
+from robotenis_ros.node import spin
+def make():
+    node = rclpy.create_node('signal_test')
+    node.create_timer(0.01, lambda: print('tick', flush=True))
+    return node
+sys.exit(spin(make, 'signal_test', events=True))
+"""
+
+
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_stops_a_node_on_the_events_executor_cleanly(sig):
+    """Its spin() alone would not return on a signal: the slices let the signal through."""
+    proc = subprocess.Popen([sys.executable, '-c', SPINNER], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline() == 'tick\n', 'the node did not spin'
+        proc.send_signal(sig)
+        assert proc.wait(timeout=5.0) == 0     # a slice (EVENTS_SLICE) and a node's shutdown
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()

@@ -122,7 +122,7 @@ class HandCameraNode(Node):
 
 def main(args=None):
     return spin(HandCameraNode, 'hand_camera',
-                (DescriptionError, vision_camera.CameraError, ValueError), args)
+                (DescriptionError, vision_camera.CameraError, ValueError), args, events=True)
 
 
 if __name__ == '__main__':

@@ -164,7 +164,7 @@ class SimMotorsNode(Node):
 
 
 def main(args=None):
-    return spin(SimMotorsNode, 'sim_motors', (DescriptionError, ValueError), args)
+    return spin(SimMotorsNode, 'sim_motors', (DescriptionError, ValueError), args, events=True)
 
 
 if __name__ == '__main__':
