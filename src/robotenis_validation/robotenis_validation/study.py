@@ -30,7 +30,7 @@ def detector_bias(C, radius, method='model', camera=None):
 
 
 def static_run(truth, declared, n, seed, selection='boundary', guess_error=BALL_GUESS_ERROR,
-               images=None):
+               images=None, max_range=poses.PLAN_RANGE[1]):
     """
     Run a static session of ``n`` planned poses on ``truth`` and the residual loop on it.
 
@@ -38,10 +38,10 @@ def static_run(truth, declared, n, seed, selection='boundary', guess_error=BALL_
     and a guess of the ball position that is off by ``guess_error`` (m). ``images``: a detector
     method; each rest then also carries the detector's bias at its true pose (detector_bias), as
     a session through rendered images would without its dynamics, and rests whose image the
-    detector refuses are dropped.
+    detector refuses are dropped. ``max_range``: the farthest the ball is planned (m).
     """
     rng = np.random.default_rng(seed)
-    P = poses.select(selection, declared, truth.sphere_position + guess_error, n, rng)
+    P = poses.select(selection, declared, truth.sphere_position + guess_error, n, rng, max_range)
     Theta, sigma, sphere, cov, kept = static_session.run(truth, declared, P,
                                                          synthetic.NoiseModel(), rng)
     if images:
