@@ -84,7 +84,8 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0):
     if prior is not None and method != 'baseline':
         try:
             return measure(img, camera, radius, method, np.asarray(prior.position, dtype=float),
-                           prior.extra.get('psf_sigma', BLUR_GUESS), gamma)
+                           prior.extra.get('psf_sigma', BLUR_GUESS), gamma,
+                           prior.extra.get('noise_levels'))
         except DetectionError:
             pass
     found, failures = [], []
@@ -190,7 +191,7 @@ def find(img, camera, radius):
     return spheres[:MEASURED]
 
 
-def measure(img, camera, radius, method, c0, blur, gamma=1.0):
+def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None):
     """
     Measure the sphere whose outline lies near that of sphere c0 (m), by ``method``.
 
@@ -198,7 +199,8 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0):
     A ball's edge changes sign (brighter or darker than its background) a few times around it at
     most; a checkerboard's or a texture's, all the time (MAX_FLIPS). From a search's
     start (``blur`` BLUR_GUESS) the model is fitted twice: first without the limb's shading, which
-    pulls an outline a pixel or two off into place.
+    pulls an outline a pixel or two off into place; from a previous frame's model fit, its
+    ``noise_levels`` settle the robust weights at once (model_fit.fit).
     """
     if method == 'baseline':
         centre = camera.project(c0)
@@ -208,7 +210,7 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0):
         if blur == BLUR_GUESS:
             first = model_fit.fit(img, camera, radius, c0, 1.5, gamma, iterations=4, limb=False)
             c0, blur = first.c, first.blur
-        fit = model_fit.fit(img, camera, radius, c0, blur, gamma)
+        fit = model_fit.fit(img, camera, radius, c0, blur, gamma, noise_levels=noise_levels)
         covered = fit.coverage()
         flips = fit.polarity_flips()
         if flips > MAX_FLIPS:
@@ -225,7 +227,7 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0):
         return Detection(fit.c, fit.cov, edge, float('nan'), 'model',
                          {'psf_sigma': fit.blur, 'noise': fit.noise, 'coverage': covered,
                           'rms': fit.rms, 'kept': fit.kept, 'iterations': fit.iterations,
-                          'step': float(np.median(step))})
+                          'step': float(np.median(step)), 'noise_levels': fit.noise_levels})
     ideal, pf, sigma, c_out = outline(img, camera, radius, c0, blur)
     xy = camera.to_normalized(ideal)
     weights = 1.0 / np.maximum(pf.sigma_e, 0.02) ** 2      # floored: no point outweighs the rest

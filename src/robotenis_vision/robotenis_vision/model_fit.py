@@ -337,6 +337,8 @@ class ModelFit:
     iterations: int
     annulus: Annulus = field(repr=False)
     prior_weights: np.ndarray = field(default=None, repr=False)   # (n,) before robust weights
+    # the robust scale, the noise the weights assumed and the edge's, ball's, background's noise
+    noise_levels: tuple = field(default=None, repr=False)
 
     def edge_bins(self, min_step=8.0):
         """
@@ -416,7 +418,8 @@ def linearise(values, gamma):
     return 255.0 * g ** gamma, g ** (2 - 2 * gamma)
 
 
-def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=True):
+def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=True,
+        noise_levels=None):
     """
     Fit the sphere of radius R to the image from a start c0 (m) whose outline is a pixel or so off.
 
@@ -425,6 +428,9 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
     ``tol`` of its standard deviation. ``limb``: fit the limb's square-root shading (without it,
     a coarse first fit that only pulls the outline into place). A step moves the outline by at
     most MAX_STEP_PX and the blur by a third. DetectionError when the fit cannot be made.
+    ``noise_levels``: a previous fit's of the same scene (ModelFit.noise_levels, a frame before at
+    rest): the robust scale and the zones' noise start there instead of being found in the first
+    iterations, so that the weights are settled from the first step (half the iterations).
     """
     c = np.asarray(c0, dtype=float).copy()
     s = float(np.clip(blur0, *BLUR_RANGE))
@@ -437,19 +443,21 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
     X, H = columns(geo, ann, s)[:2]
     H = H if limb else H[:, :0]
     beta, levels, _ = _solve(X, H, y, w0, ann)
-    scale = noise = None
+    known = noise_levels is not None
+    scale, noise, zone_noise = ((noise_levels[0], noise_levels[1], noise_levels[2:]) if known
+                                else (None, None, None))
     for it in range(1, iterations + 1):
         X, H, dX_dt, dX_ds, dH_dt, dH_ds = columns(geo, ann, s)
         if not limb:
             H, dH_dt, dH_ds = H[:, :0], dH_dt[:, :0], dH_ds[:, :0]
         lv = levels[ann.bins]
         r = (y - np.einsum('ni,ni->n', X, lv) - H @ beta) * np.sqrt(w0)
-        if it <= 3:
+        if it <= 3 and not known:
             # floored: on an image without noise the model's own small misfit must not count as
             # outliers (a grey level: 8-bit rounding and a few tenths of a percent of a step)
             scale = max(1.4826 * np.median(np.abs(r[w0 > 0])), SCALE_FLOOR)
             noise = max(_noise(r, ann, w0 > 0), SCALE_FLOOR)
-        if it == 2:
+        if it == (1 if known else 2):
             # the ball, the background and the edge need not be equally noisy (a sensor's noise
             # grows with the signal; a renderer's sampling of the lens and the pixel with the
             # edge): each zone weighted by its own, the edge's (within 1.5 blurs) from its
@@ -457,11 +465,12 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
             edge = np.abs(geo.d) < 1.5 * s
             inside = (geo.d > 0) & ~edge
             zone = np.where(edge, 0, np.where(inside, 1, 2))
-            levels_ = [max(1.4826 * np.median(np.abs(r[(w0 > 0) & edge])), SCALE_FLOOR)
-                       if np.sum((w0 > 0) & edge) > 20 else noise,
-                       max(_noise(r, ann, (w0 > 0) & inside), SCALE_FLOOR),
-                       max(_noise(r, ann, (w0 > 0) & (geo.d <= 0) & ~edge), SCALE_FLOOR)]
-            factor = np.maximum(np.array(levels_)[zone] / noise, 1e-3)
+            if not known:
+                zone_noise = (max(1.4826 * np.median(np.abs(r[(w0 > 0) & edge])), SCALE_FLOOR)
+                              if np.sum((w0 > 0) & edge) > 20 else noise,
+                              max(_noise(r, ann, (w0 > 0) & inside), SCALE_FLOOR),
+                              max(_noise(r, ann, (w0 > 0) & (geo.d <= 0) & ~edge), SCALE_FLOOR))
+            factor = np.maximum(np.array(zone_noise)[zone] / noise, 1e-3)
             w0, r = w0 / factor ** 2, r / factor
         w = _weights(r, w0, ann, scale, noise)
         dy_dt = np.einsum('ni,ni->n', dX_dt, lv) + dH_dt @ beta
@@ -489,5 +498,6 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
     X, H = columns(geo, ann, s)[:2]
     H = H if limb else H[:, :0]
     r = (y - np.einsum('ni,ni->n', X, levels[ann.bins]) - H @ beta) * np.sqrt(w0)
-    noise = _noise(r, ann, w > 0)
-    return ModelFit(c, noise * noise * S_inv[:3, :3], s, noise, beta, levels, w, r, it, ann, w0)
+    weight_noise, noise = noise, _noise(r, ann, w > 0)
+    return ModelFit(c, noise * noise * S_inv[:3, :3], s, noise, beta, levels, w, r, it, ann, w0,
+                    (scale, weight_noise, *zone_noise))

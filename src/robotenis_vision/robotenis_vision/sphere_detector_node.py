@@ -69,6 +69,7 @@ class SphereDetectorNode(Node):
             raise ValueError(f"rest_method must be one of {', '.join(detector.METHODS)} or '', "
                              f'got {self.rest_method!r}')
         self.rest = RestSwitch(float(p['rest_motion_px']), int(p['rest_frames']))
+        self.last_at_rest = None        # the rest method's detection of the frame before
         self.gamma = float(p['gamma'])
         if not self.gamma > 0:
             raise ValueError(f'gamma must be positive, got {self.gamma}')
@@ -137,16 +138,21 @@ class SphereDetectorNode(Node):
         Return the detection to publish: the rest method's once the ball has stood still.
 
         Standing still: its image moved less than rest_motion_px since the last frame, for
-        rest_frames frames (robotenis_vision.rest). The rest method starts from the fast
-        detection; if it fails, the fast detection is published.
+        rest_frames frames (robotenis_vision.rest). The rest method starts from its own detection
+        of the frame before while the ball stays still (the same scene: its blur and noise levels
+        carry over), else from the fast detection; if it fails, the fast detection is published.
         """
         still = self.rest.update(self.camera.project(det.position))
         if not self.rest_method or self.rest_method == self.method or not still:
+            self.last_at_rest = None
             return det
         try:
-            return detector.detect(image, self.camera, self.radius, self.rest_method, det,
-                                   self.gamma)
+            self.last_at_rest = detector.detect(image, self.camera, self.radius,
+                                                self.rest_method, self.last_at_rest or det,
+                                                self.gamma)
+            return self.last_at_rest
         except detector.DetectionError as e:
+            self.last_at_rest = None
             self.get_logger().info(f'{self.rest_method} at rest: {e}; '
                                    f'{det.method} published', throttle_duration_sec=5.0)
             return det
