@@ -21,3 +21,7 @@ def test_quick_report_has_every_section_and_its_figures(tmp_path):
                             r'<td>[\d.]+</td><td>[\d.]+</td><td>[\d.]+</td></tr>', page))
     assert (float(means['final (residual loop)']) < float(means['plain 15-parameter'])
             < float(means['nominal']))
+    # and so do the models calibrated through rendered images, as the live session measures
+    through_images = dict(re.findall(r'<tr><td>(\w+), through images</td><td>([\d.]+)</td>', page))
+    assert set(through_images) == {'plain', 'final'}
+    assert max(map(float, through_images.values())) < float(means['nominal'])
