@@ -21,27 +21,31 @@ than a pose can last is stopped, naming the silent input, with its bag kept and 
 (robotenis_calibration.session_limits). A second request while a session runs is refused with
 "busy"; progress goes to calibration/progress. On shutdown a bag being recorded is closed, so it
 stays whole. Parameters: the table PARAMETERS.
+
+The node runs on the EventsExecutor (robotenis_ros.node.spin): it takes every joint state, 1 kHz
+of simulated time, as bytes, recorded as they are and their positions read from them
+(cdr_arrays.JointStateDecoder). The service is a robotenis_ros.node.DeferredService: a request
+starts the session, and the timer that drives it answers when it is over.
 """
 import array
 import math
 import os
 import time
+from types import SimpleNamespace
 
 from geometry_msgs.msg import PointStamped
 import numpy as np
-from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.serialization import deserialize_message, serialize_message
-from rclpy.task import Future
-from robotenis_calibration import bag_io, pipeline, poses, session_limits
+from robotenis_calibration import bag_io, cdr_arrays, pipeline, poses, session_limits
 from robotenis_calibration.session_runner import DONE, MEASURING, RunnerConfig, SessionRunner
 from robotenis_interfaces.msg import CalibrationProgress, RestMarker, SphereDetection
 from robotenis_interfaces.srv import Calibrate
 from robotenis_kinematics import description
-from robotenis_ros.convert import image_array, joint_vector, point_stamped, xyz
-from robotenis_ros.names import BASE_FRAME
-from robotenis_ros.node import declare_parameters, LATCHED, spin
+from robotenis_ros.convert import image_array, point_stamped, xyz
+from robotenis_ros.names import BASE_FRAME, JOINTS
+from robotenis_ros.node import declare_parameters, DeferredService, LATCHED, spin
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
 from std_msgs.msg import String
 
@@ -58,6 +62,10 @@ PUBLISHED = {
     'robot_description': 'std_msgs/msg/String',
 }
 UNSET = [math.nan] * 3
+# Messages kept for the node while it is busy: a second of joint states at 1 kHz. Replanning
+# after the first rests holds it 0.7 s of simulated time, and with a queue of 50 the joint states
+# of that move were lost (the moves' reversals give the backlash sides).
+QUEUE = 1000
 PARAMETERS = {
     'description_path': (description.config_path('nominal.yaml'),
                          'the robot description the session starts from'),
@@ -92,54 +100,64 @@ class CalibrationNode(Node):
         self.busy = False
         self.runner = None
         self.writer = None
-        self.finished = None
+        self.session = None             # the request being served: see start_session
         self.images_kept = {}           # pose index -> images recorded during its rest
+        self.joints = cdr_arrays.JointStateDecoder(JOINTS)
         self.goal_pub = self.create_publisher(PointStamped, 'goal', 10)
         self.progress_pub = self.create_publisher(CalibrationProgress, 'calibration/progress', 10)
         self.rest_pub = self.create_publisher(RestMarker, 'calibration/rest', 10)
         self.description_pub = self.create_publisher(String, 'robot_description', LATCHED)
+        fed = {'joint_states': self.on_joint_states, 'sphere/detection': self.on_detection}
         for topic, (cls, _) in RECORDED.items():
-            qos = qos_profile_sensor_data if topic.startswith('camera') else 50
-            self.create_subscription(cls, topic, lambda data, t=topic: self.on_message(t, data),
-                                     qos, raw=True)
-        self.create_subscription(Image, self.image_topic, self.on_image, qos_profile_sensor_data)
-        # The service awaits the whole session: in its own reentrant group, so that the timer and
-        # the subscriptions (default group) run meanwhile and a second request can be answered
-        # "busy".
-        self.create_service(Calibrate, 'calibrate', self.on_calibrate,
-                            callback_group=ReentrantCallbackGroup())
+            qos = qos_profile_sensor_data if topic.startswith('camera') else QUEUE
+            callback = fed.get(topic, lambda data, t=topic: self.record(t, data, self.stamp_ns()))
+            self.create_subscription(cls, topic, callback, qos, raw=True)
+        self.create_subscription(Image, self.image_topic, self.on_image, qos_profile_sensor_data,
+                                 raw=True)
+        # The service is answered when the session is over, minutes later: meanwhile the timer
+        # and the subscriptions run, and a second request is answered "busy".
+        self.service = DeferredService(self, Calibrate, 'calibrate', self.on_calibrate)
         self.create_timer(0.01, self.on_timer)
 
-    def now(self):
-        return self.get_clock().now().nanoseconds * 1e-9
+    def stamp_ns(self):
+        return self.get_clock().now().nanoseconds
 
-    def record(self, topic, msg):
+    def now(self):
+        return self.stamp_ns() * 1e-9
+
+    def record(self, topic, msg, stamp_ns=None):
         """Write a message (or its serialized bytes) to the bag being recorded, if any."""
         if self.writer is not None:
             data = msg if isinstance(msg, bytes) else serialize_message(msg)
-            self.writer.write(bag_topic(topic), self.get_clock().now().nanoseconds, data)
+            self.writer.write(bag_topic(topic), self.stamp_ns() if stamp_ns is None else stamp_ns,
+                              data)
 
-    def on_message(self, topic, data):
-        """Record a subscribed topic's serialized message; feed the runner what it measures."""
-        self.record(topic, data)
-        if self.runner is None:
-            return
-        t = self.now()
-        if topic == 'joint_states':
-            Theta = joint_vector(deserialize_message(data, JointState), 'position')
+    def on_joint_states(self, data):
+        """Record a joint state as it arrived; feed its positions to the runner."""
+        stamp_ns = self.stamp_ns()
+        self.record('joint_states', data, stamp_ns)
+        if self.runner is not None:
+            Theta = self.joints.positions(data)
             if Theta is not None:
-                self.runner.joint_state(t, Theta)
-        elif topic == 'sphere/detection':
-            msg = deserialize_message(data, SphereDetection)
-            self.runner.detection(t, xyz(msg.position), np.reshape(msg.covariance, (3, 3)))
+                self.runner.joint_state(stamp_ns * 1e-9, Theta)
 
-    def on_image(self, msg):
+    def on_detection(self, data):
+        """Record a sphere detection as it arrived; feed it to the runner."""
+        stamp_ns = self.stamp_ns()
+        self.record('sphere/detection', data, stamp_ns)
+        if self.runner is not None:
+            msg = deserialize_message(data, SphereDetection)
+            self.runner.detection(stamp_ns * 1e-9, xyz(msg.position),
+                                  np.reshape(msg.covariance, (3, 3)))
+
+    def on_image(self, data):
         """Record the first images_per_pose mono8 frames of each rest as PNG."""
         if self.runner is None or self.writer is None or self.runner.state != MEASURING:
             return
         index = self.runner.index
         if self.images_kept.get(index, 0) >= self.get_parameter('images_per_pose').value:
             return
+        msg = deserialize_message(data, Image)
         try:
             pixels = image_array(msg)
         except ValueError as e:
@@ -155,8 +173,18 @@ class CalibrationNode(Node):
         if self.runner is None:
             return
         self.runner.tick(self.now())
+        self.run_actions()
+
+    def run_actions(self):
+        """Execute what the runner asks for; finish the session when it is done."""
+        done = False
         for kind, value in self.runner.take_actions():
-            self.execute(kind, value)
+            if kind == 'done':
+                done = True
+            else:
+                self.execute(kind, value)
+        if done:
+            self.finish_session()
 
     def execute(self, kind, value):
         stamp = self.get_clock().now().to_msg()
@@ -174,8 +202,6 @@ class CalibrationNode(Node):
         elif kind == 'progress':
             stage, index, count = value
             self.publish_progress(stage, index, count, self.runner.fraction)
-        elif kind == 'done' and not self.finished.done():
-            self.finished.set_result(True)
 
     def log_pose(self, index):
         """Log how the pose ``index`` ended: its rest measured, or skipped with the reason."""
@@ -207,28 +233,28 @@ class CalibrationNode(Node):
     def param(self, name, requested):
         return requested if requested else self.get_parameter(name).value
 
-    async def on_calibrate(self, request, response):
+    def on_calibrate(self, request, answer):
+        """Start a session for the request; it is answered when the session is over."""
         if self.busy:
-            response.success = False
-            response.message = 'busy: a calibration session is already running'
-            return response
+            answer(Calibrate.Response(success=False, message='busy: a calibration session is '
+                                                             'already running'))
+            return
         self.busy = True
         try:
-            await self.run_session(request, response)
+            self.start_session(request, answer)
         except (pipeline.CalibrationError, ValueError, OSError) as e:
-            response.success, response.message = False, f'calibration failed: {e}'
-            self.get_logger().error(response.message)
-        except Exception:
-            if self.context.ok():
-                raise
-            # SIGINT or SIGTERM shut the context down under the session (a publish then fails):
-            # a stop, not a crash; the bag is closed below.
-            response.success, response.message = False, 'the calibration node was stopped'
-        finally:
-            self.close_bag()
-            self.runner = None
-            self.busy = False
+            self.end_session(answer, self.failed(Calibrate.Response(), e))
+
+    def failed(self, response, error):
+        response.success, response.message = False, f'calibration failed: {error}'
+        self.get_logger().error(response.message)
         return response
+
+    def end_session(self, answer, response):
+        self.close_bag()
+        self.runner, self.session = None, None
+        self.busy = False
+        answer(response)
 
     def close_bag(self):
         """Finish the bag being recorded, if any."""
@@ -236,7 +262,8 @@ class CalibrationNode(Node):
             self.writer.close()
             self.writer = None
 
-    async def run_session(self, request, response):
+    def start_session(self, request, answer):
+        """Plan the poses, open the bag and start the runner; the timer then drives the session."""
         guess = np.asarray(self.get_parameter('sphere_guess').value, dtype=float)
         if guess.shape != (3,) or not np.all(np.isfinite(guess)):
             raise ValueError("the parameter sphere_guess (the ball's rough position, base frame, "
@@ -264,7 +291,6 @@ class CalibrationNode(Node):
         self.get_logger().info(f'session: {len(planned)} poses'
                                f' ({request.pose_selection or "boundary"}), '
                                f'{config.frames_per_pose} frames each, recording {bag}')
-        self.finished = Future()
 
         def replan(rests, n):
             refined = poses.refined_guess(declared, [np.mean(r.Theta, axis=0) for r in rests],
@@ -282,10 +308,24 @@ class CalibrationNode(Node):
                                    f'the last {n} poses planned again')
             return again
 
+        self.session = SimpleNamespace(request=request, answer=answer, planned=planned, bag=bag,
+                                       result_path=result_path)
         on_replan = replan if self.get_parameter('replan').value else None
         self.runner = SessionRunner(planned, config, on_replan)
         self.runner.start(self.now())
-        await self.finished
+        self.run_actions()                  # the first goal, now
+
+    def finish_session(self):
+        """Close the bag, calibrate from it and answer the request (the runner is done)."""
+        session, response = self.session, Calibrate.Response()
+        try:
+            self.calibrate_session(session, response)
+        except (pipeline.CalibrationError, ValueError, OSError) as e:
+            self.failed(response, e)
+        self.end_session(session.answer, response)
+
+    def calibrate_session(self, session, response):
+        planned, bag, result_path = session.planned, session.bag, session.result_path
         skipped = list(self.runner.skipped)
         self.close_bag()
         response.bag_path = bag
@@ -296,7 +336,8 @@ class CalibrationNode(Node):
                                 f'written, the bag is kept: {bag}')
             self.get_logger().error(response.message)
             return
-        settings = pipeline.Settings(self.get_parameter('holdout_fraction').value, request.seed)
+        settings = pipeline.Settings(self.get_parameter('holdout_fraction').value,
+                                     session.request.seed)
         outcome = pipeline.calibrate_bag(
             bag, result_path, settings,
             progress=lambda text: self.publish_progress('identifying', len(planned) - 1,
@@ -315,4 +356,4 @@ class CalibrationNode(Node):
 
 def main(args=None):
     return spin(CalibrationNode, 'calibration', (ValueError, description.DescriptionError), args,
-                finish=CalibrationNode.close_bag)
+                finish=CalibrationNode.close_bag, events=True)

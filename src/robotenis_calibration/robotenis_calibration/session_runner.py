@@ -12,6 +12,7 @@ calibration node feeds it messages and executes the actions it returns.
 """
 from collections import deque
 from dataclasses import dataclass, field
+import math
 
 import numpy as np
 from robotenis_calibration import session_limits
@@ -21,6 +22,55 @@ INPUTS = {  # the inputs watched for silence: name -> what feeds it
     'joint_states': "the robot's driver (joint states)",
     'sphere/detection': 'the sphere detector (or the ball is out of view at every pose)',
 }
+
+
+class SlidingRange:
+    """
+    The range (max - min) of each joint's readings over the last ``span`` seconds, as they come.
+
+    Per joint, the readings that can still be the window's maximum (a decreasing queue) and
+    minimum (increasing), and the times of its NaN readings (a NaN in the window makes the range
+    NaN, as numpy's ptp): O(1) per reading on average, where the range of the whole window costs a
+    pass over its ~100 readings at 1 kHz (26 us a reading in numpy). The same max - min.
+    """
+
+    def __init__(self, span):
+        self.span = span
+        self.clear()
+
+    def clear(self):
+        self.first = None                 # time of the oldest reading in the window
+        self._times = deque()
+        self._queues = None               # per joint: (maxima, minima, NaN times)
+
+    def add(self, t, values):
+        """Add the readings (sequence of floats) at time t; drop those older than t - span."""
+        if self._queues is None:
+            self._queues = [(deque(), deque(), deque()) for _ in values]
+        self._times.append(t)
+        for v, (high, low, nan) in zip(values, self._queues):
+            if v != v:
+                nan.append((t, v))
+                continue
+            while high and high[-1][1] <= v:
+                high.pop()
+            high.append((t, v))
+            while low and low[-1][1] >= v:
+                low.pop()
+            low.append((t, v))
+        old = t - self.span
+        while self._times[0] < old:
+            self._times.popleft()
+        for queues in self._queues:
+            for queue in queues:
+                while queue and queue[0][0] < old:
+                    queue.popleft()
+        self.first = self._times[0]
+
+    def ranges(self):
+        """Return each joint's max - min over the window (NaN if it holds a NaN)."""
+        return [math.nan if nan or not high else high[0][1] - low[0][1]
+                for high, low, nan in self._queues]
 
 
 @dataclass
@@ -71,7 +121,7 @@ class SessionRunner:
         self.last_input = {}              # input name -> time of its last message
         self.actions = []
         self._t_state = None
-        self._window = deque()            # (t, Theta) of the last still_time while moving
+        self._window = SlidingRange(config.still_time)   # the last still_time while moving
         self._rest = None
         self._measured = [0, 0.0]         # frames and seconds of the rests measured so far
 
@@ -103,20 +153,16 @@ class SessionRunner:
 
     def joint_state(self, t, Theta):
         """Take one /joint_states sample: the increments (rad) of the three joints."""
-        Theta = np.asarray(Theta, dtype=float)
         self.last_input['joint_states'] = t
         if self.state == MOVING:
-            self._window.append((t, Theta))
-            while self._window and self._window[0][0] < t - self.config.still_time:
-                self._window.popleft()
+            self._window.add(t, [float(v) for v in Theta])
             # Ignore stillness right after the goal: the robot has not started moving yet.
-            if t - self._t_state > 0.1 and self._window[0][0] <= t - 0.9 * self.config.still_time:
-                values = np.array([v for _, v in self._window])
-                if np.all(np.ptp(values, axis=0) <= self.config.still_range):
+            if t - self._t_state > 0.1 and self._window.first <= t - 0.9 * self.config.still_time:
+                if all(r <= self.config.still_range for r in self._window.ranges()):
                     self._enter(SETTLING, t)
                     self.actions.append(('progress', (SETTLING, self.index, len(self.poses))))
         elif self.state == MEASURING:
-            self._rest.Theta.append(Theta)
+            self._rest.Theta.append(np.asarray(Theta, dtype=float))
 
     def detection(self, t, position, covariance):
         """Take one sphere detection, in the optical frame (m), with its covariance (3x3, m^2)."""

@@ -3,7 +3,8 @@ import math
 import numpy as np
 
 from robotenis_calibration import session_limits
-from robotenis_calibration.session_runner import DONE, MEASURING, RunnerConfig, SessionRunner
+from robotenis_calibration.session_runner import (DONE, MEASURING, RunnerConfig, SessionRunner,
+                                                  SlidingRange)
 
 
 def drive(runner, visible, dt=0.001, t_end=30.0, seed=0, joints_until=math.inf,
@@ -180,3 +181,22 @@ def test_a_stop_while_measuring_closes_the_rest():
     runner.tick(session_limits.pose_time_limit(runner.config) + 0.1)
     kinds = [a[0] for a in runner.take_actions()]
     assert kinds[-2:] == ['rest_end', 'done'] and runner.state == DONE
+
+
+def test_the_sliding_range_is_the_window_s_max_minus_min():
+    """Quantised readings (many ties), irregular times, a NaN: the range of the window's own."""
+    rng = np.random.default_rng(3)
+    window, span = SlidingRange(0.1), 0.1
+    t, seen = 0.0, []
+    for k in range(3000):
+        t += rng.choice([0.001, 0.004, 0.02])
+        values = np.round(rng.normal(scale=3.0, size=3)) * 0.5
+        if k == 1500:
+            values[1] = np.nan
+        window.add(t, list(values))
+        seen = [(s, v) for s, v in seen if s >= t - span] + [(t, values)]
+        assert window.first == seen[0][0]
+        want = np.ptp([v for _, v in seen], axis=0)
+        got = np.array(window.ranges())
+        assert np.array_equal(np.isnan(got), np.isnan(want))
+        assert np.array_equal(got[~np.isnan(want)], want[~np.isnan(want)])

@@ -1,10 +1,12 @@
 """
-Running a node: parameters declared from one table, and spinning with an ordered shutdown.
+Running a node: parameters declared from one table, spinning with an ordered shutdown, services.
 
 Each node module keeps its parameters in one table,
 ``PARAMETERS = {name: (default, description)}``, declared by ``declare_parameters``; launch files
-are checked against these tables (robotenis_bringup's tests).
+are checked against these tables (robotenis_bringup's tests). A service whose answer takes long
+(a calibration session) is a ``DeferredService``: answered later, without blocking the executor.
 """
+import functools
 import sys
 
 from rcl_interfaces.msg import ParameterDescriptor
@@ -84,3 +86,36 @@ def spin(make_node, name, fatal=(ValueError,), args=None, finish=None, events=Fa
             node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+class _Deferred:
+    """What a DeferredService's rclpy callback returns: the request, until its header is known."""
+
+    def __init__(self, request):
+        self.request = request
+
+
+class DeferredService:
+    """
+    A service answered when the work is done, not when its callback returns.
+
+    ``callback(request, answer)`` is called for each request; ``answer(response)`` sends that
+    request's response, then or later (from any callback of the node's executor). rclpy answers
+    with what a service callback returns, so a request that takes minutes would hold the executor,
+    unless the callback is a coroutine, which the EventsExecutor does not run. Both executors
+    hand the callback's result and the request's header to the service's ``send_response``;
+    here that receives the request instead, and the header is kept for ``answer``, which
+    calls rclpy's own ``Service.send_response(response, header)``.
+    """
+
+    def __init__(self, node, srv_type, name, callback, **kwargs):
+        self.callback = callback
+        self.service = node.create_service(srv_type, name, self._take, **kwargs)
+        self._send = self.service.send_response
+        self.service.send_response = self._dispatch
+
+    def _take(self, request, response):
+        return _Deferred(request)
+
+    def _dispatch(self, deferred, header):
+        self.callback(deferred.request, functools.partial(self._send, header=header))

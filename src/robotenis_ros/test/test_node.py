@@ -5,9 +5,12 @@ import sys
 
 import pytest
 import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.experimental import EventsExecutor
 from rclpy.parameter import Parameter
 
-from robotenis_ros.node import declare_parameters, spin
+from robotenis_ros.node import declare_parameters, DeferredService, spin
+from std_srvs.srv import Trigger
 
 TABLE = {'rate': (1000.0, 'Hz'), 'name': ('x', 'a name'), 'gains': ([1.0, 2.0], 'two gains')}
 
@@ -73,3 +76,42 @@ def test_a_signal_stops_a_node_on_the_events_executor_cleanly(sig):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+@pytest.mark.parametrize('make_executor', [SingleThreadedExecutor, EventsExecutor])
+def test_a_deferred_service_answers_later_and_meanwhile_serves_other_requests(make_executor):
+    """The first request is answered three timer ticks later; the second at once, meanwhile."""
+    rclpy.init()
+    try:
+        server, client_node = rclpy.create_node('deferred'), rclpy.create_node('asker')
+        pending, ticks = [], []
+
+        def on_request(request, answer):
+            if pending:
+                answer(Trigger.Response(success=False, message='busy'))
+            else:
+                pending.append(answer)
+
+        def tick():
+            ticks.append(len(ticks))
+            if pending and len(ticks) >= 3:
+                pending.pop()(Trigger.Response(success=True, message=f'after {len(ticks)} ticks'))
+        DeferredService(server, Trigger, 'deferred', on_request)
+        server.create_timer(0.02, tick)
+        executor = make_executor()
+        executor.add_node(server)
+        executor.add_node(client_node)
+        client = client_node.create_client(Trigger, 'deferred')
+        assert client.wait_for_service(timeout_sec=10.0)
+        first = client.call_async(Trigger.Request())
+        while not pending:
+            executor.spin_once(timeout_sec=0.1)
+        second = client.call_async(Trigger.Request())
+        executor.spin_until_future_complete(second, timeout_sec=10.0)
+        assert second.result().message == 'busy' and not first.done()
+        executor.spin_until_future_complete(first, timeout_sec=10.0)
+        assert first.result().success and first.result().message == f'after {len(ticks)} ticks'
+        assert len(ticks) >= 3
+        executor.shutdown()
+    finally:
+        rclpy.try_shutdown()
