@@ -10,8 +10,10 @@ from the forward kinematics of the description in use) every ``state_decimation`
 
 Ticks come from a timer at ``rate`` (wall clock, or /clock with use_sim_time), or, with
 ``tick_on_joint_states``, from every joint reading (lockstep with a simulator; the command then
-carries the reading's stamp). The description is reloaded by the ~/reload_description service
-(std_srvs/Trigger: reads description_path again) or by setting description_path.
+carries the reading's stamp, and the node's time, for goals and velocity commands too, is the
+last reading's stamp: it needs no /clock). The description is reloaded by the
+~/reload_description service (std_srvs/Trigger: reads description_path again) or by setting
+description_path.
 """
 import sys
 
@@ -70,6 +72,8 @@ class MotionControllerNode(Node):
             self.create_timer(1.0 / p['rate'], self.on_timer)
 
     def now(self):
+        if self.tick_on_joint_states and self.reading is not None:
+            return self.reading[2]
         return self.get_clock().now().nanoseconds * 1e-9
 
     def read_gains(self, changes):
