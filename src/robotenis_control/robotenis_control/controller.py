@@ -136,7 +136,7 @@ class MotionController:
         if speed > self.max_speed:
             v = v * (self.max_speed / speed)
         if self.segments:
-            self.hold = self.desired(t)[0]
+            self.hold = np.array(self.desired(t)[0])
             self.segments = []
         self.velocity = (v, t)
 
@@ -157,8 +157,7 @@ class MotionController:
             return self.hold, v, zero
         self._retire(t)
         if self.segments and self.segments[0].t0 <= t:
-            P, dP, ddP, _ = self.segments[0].sample(t)
-            return P, dP, ddP
+            return self.segments[0].at(t)
         return self.hold, zero, zero
 
     def _retire(self, t):

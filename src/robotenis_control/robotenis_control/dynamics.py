@@ -313,29 +313,88 @@ class SingleRobotDynamics:
         return alpha
 
     def inverse_dynamics(self, P, dP, ddP):
-        """Return (alpha, alphad, tau) for motion (P, Pd, Pdd): ``inverse_dynamics`` (eqs. 4-5)."""
+        """
+        Return (alpha, alphad, tau) for motion (P, Pd, Pdd): ``inverse_dynamics`` (eqs. 4-5).
+
+        The controller's every tick: written out in local floats as ``accelerations`` (13 us
+        against 44 us with lists), the operations of the list form in its order.
+        """
+        cos, sin = math.cos, math.sin
+        px, py, pz = P
+        vx, vy, vz = dP
+        ax, ay, az = ddP
         alpha = self.inverse_kinematics(P)
-        _, Q, r, t = self.forward_kinematics(alpha)
-        dv = [[P[j] - Q[i][j] for j in range(3)] for i in range(3)]
-        beta = [-2 * self.a[i] * _dot(dv[i], t[i]) for i in range(3)]
-        dalpha = [-2 * _dot(dv[i], dP) / beta[i] for i in range(3)]
-        ddalpha = []
-        for i in range(3):
-            w = self.a[i] * dalpha[i]
-            dd = [dP[j] - w * t[i][j] for j in range(3)]
-            gamma = 2 * _dot(dd, dd) + 2 * w * dalpha[i] * _dot(dv[i], r[i])
-            ddalpha.append(-(2 * _dot(dv[i], ddP) + gamma) / beta[i])
+        al0, al1, al2 = alpha
+        a0, a1, a2 = self.a
+        cp0, cp1, cp2 = self.cp
+        sp0, sp1, sp2 = self.sp
+        R0, R1, R2 = self.R
+        ca0, sa0 = cos(al0), sin(al0)
+        ca1, sa1 = cos(al1), sin(al1)
+        ca2, sa2 = cos(al2), sin(al2)
+        rad = R0 + a0 * ca0
+        d0x, d0y, d0z = px - rad * cp0, py - rad * sp0, pz - a0 * sa0
+        rad = R1 + a1 * ca1
+        d1x, d1y, d1z = px - rad * cp1, py - rad * sp1, pz - a1 * sa1
+        rad = R2 + a2 * ca2
+        d2x, d2y, d2z = px - rad * cp2, py - rad * sp2, pz - a2 * sa2
+        r0x, r0y, r0z = ca0 * cp0, ca0 * sp0, sa0
+        r1x, r1y, r1z = ca1 * cp1, ca1 * sp1, sa1
+        r2x, r2y, r2z = ca2 * cp2, ca2 * sp2, sa2
+        t0x, t0y, t0z = -sa0 * cp0, -sa0 * sp0, ca0
+        t1x, t1y, t1z = -sa1 * cp1, -sa1 * sp1, ca1
+        t2x, t2y, t2z = -sa2 * cp2, -sa2 * sp2, ca2
+        b0 = -2 * a0 * (d0x * t0x + d0y * t0y + d0z * t0z)
+        b1 = -2 * a1 * (d1x * t1x + d1y * t1y + d1z * t1z)
+        b2 = -2 * a2 * (d2x * t2x + d2y * t2y + d2z * t2z)
+        w0 = -2 * (d0x * vx + d0y * vy + d0z * vz) / b0
+        w1 = -2 * (d1x * vx + d1y * vy + d1z * vz) / b1
+        w2 = -2 * (d2x * vx + d2y * vy + d2z * vz) / b2
+        u = a0 * w0
+        e0, e1, e2 = vx - u * t0x, vy - u * t0y, vz - u * t0z
+        g = (2 * (e0 * e0 + e1 * e1 + e2 * e2)
+             + 2 * u * w0 * (d0x * r0x + d0y * r0y + d0z * r0z))
+        dd0 = -(2 * (d0x * ax + d0y * ay + d0z * az) + g) / b0
+        u = a1 * w1
+        e0, e1, e2 = vx - u * t1x, vy - u * t1y, vz - u * t1z
+        g = (2 * (e0 * e0 + e1 * e1 + e2 * e2)
+             + 2 * u * w1 * (d1x * r1x + d1y * r1y + d1z * r1z))
+        dd1 = -(2 * (d1x * ax + d1y * ay + d1z * az) + g) / b1
+        u = a2 * w2
+        e0, e1, e2 = vx - u * t2x, vy - u * t2y, vz - u * t2z
+        g = (2 * (e0 * e0 + e1 * e1 + e2 * e2)
+             + 2 * u * w2 * (d2x * r2x + d2y * r2y + d2z * r2z))
+        dd2 = -(2 * (d2x * ax + d2y * ay + d2z * az) + g) / b2
         # A^T lambda = M_PP Pdd + M_Pa alphadd + h_P (eq. 4)
-        rhs = [self.M_PP * ddP[j]
-               + sum(self.k[i] * (t[i][j] * ddalpha[i] - dalpha[i] ** 2 * r[i][j])
-                     for i in range(3))
-               for j in range(3)]
-        rhs[2] -= self.g_platform
-        AT_inv = _inverse3([[2 * dv[0][j], 2 * dv[1][j], 2 * dv[2][j]] for j in range(3)])
-        lam = [_dot(AT_inv[i], rhs) for i in range(3)]
-        tau = [self.M_aa[i] * ddalpha[i] + self.k[i] * _dot(t[i], ddP)
-               - self.g_arm[i] * math.cos(alpha[i]) - beta[i] * lam[i] for i in range(3)]
-        return alpha, dalpha, tau
+        k0, k1, k2 = self.k
+        M_PP = self.M_PP
+        q0, q1, q2 = w0 ** 2, w1 ** 2, w2 ** 2
+        hx = (M_PP * ax + (0 + k0 * (t0x * dd0 - q0 * r0x) + k1 * (t1x * dd1 - q1 * r1x)
+                           + k2 * (t2x * dd2 - q2 * r2x)))
+        hy = (M_PP * ay + (0 + k0 * (t0y * dd0 - q0 * r0y) + k1 * (t1y * dd1 - q1 * r1y)
+                           + k2 * (t2y * dd2 - q2 * r2y)))
+        hz = (M_PP * az + (0 + k0 * (t0z * dd0 - q0 * r0z) + k1 * (t1z * dd1 - q1 * r1z)
+                           + k2 * (t2z * dd2 - q2 * r2z))) - self.g_platform
+        # lambda = (A^T)^-1 rhs, A^T with columns 2 d_i: its inverse by cofactors, as _inverse3
+        m00, m01, m02 = 2 * d0x, 2 * d1x, 2 * d2x
+        m10, m11, m12 = 2 * d0y, 2 * d1y, 2 * d2y
+        m20, m21, m22 = 2 * d0z, 2 * d1z, 2 * d2z
+        c00, c01, c02 = m11 * m22 - m12 * m21, m12 * m20 - m10 * m22, m10 * m21 - m11 * m20
+        c10, c11, c12 = m21 * m02 - m22 * m01, m22 * m00 - m20 * m02, m20 * m01 - m21 * m00
+        c20, c21, c22 = m01 * m12 - m02 * m11, m02 * m10 - m00 * m12, m00 * m11 - m01 * m10
+        det = m00 * c00 + m01 * c01 + m02 * c02
+        if det == 0.0:
+            raise ZeroDivisionError('singular 3x3 matrix (parallel singularity: the forearms are '
+                                    'coplanar)')
+        lam0 = c00 / det * hx + c10 / det * hy + c20 / det * hz
+        lam1 = c01 / det * hx + c11 / det * hy + c21 / det * hz
+        lam2 = c02 / det * hx + c12 / det * hy + c22 / det * hz
+        ga0, ga1, ga2 = self.g_arm
+        Maa0, Maa1, Maa2 = self.M_aa
+        tau = [Maa0 * dd0 + k0 * (t0x * ax + t0y * ay + t0z * az) - ga0 * cos(al0) - b0 * lam0,
+               Maa1 * dd1 + k1 * (t1x * ax + t1y * ay + t1z * az) - ga1 * cos(al1) - b1 * lam1,
+               Maa2 * dd2 + k2 * (t2x * ax + t2y * ay + t2z * az) - ga2 * cos(al2) - b2 * lam2]
+        return alpha, [w0, w1, w2], tau
 
     def accelerations(self, alpha, dalpha, tau):
         """
@@ -345,53 +404,146 @@ class SingleRobotDynamics:
         this four times per 1 ms step). With d_i = C_i - B_i, n_i = d_j x d_k ((i, j, k) cyclic)
         and D = d_1 . (d_2 x d_3), the inverse of A (rows 2 d_i^T) has columns n_i / (2 D), so the
         columns of J = -A^-1 diag(beta) are J_i = a_i (d_i . t_i) n_i / D and
-        c = -A^-1 gamma = -sum gamma_i n_i / (2 D).
+        c = -A^-1 gamma = -sum gamma_i n_i / (2 D). Every vector is in local floats, the legs
+        unrolled (9 us against 28 us with lists of tuples: the same operations in the same order,
+        so the same results to the bit); the effector as in ``forward_kinematics``.
         """
-        P, Q, r, t = self.forward_kinematics(alpha)
-        px, py, pz = P
-        d = [(px - q[0], py - q[1], pz - q[2]) for q in Q]
-        n = [_cross(d[(i + 1) % 3], d[(i + 2) % 3]) for i in range(3)]
-        D = d[0][0] * n[0][0] + d[0][1] * n[0][1] + d[0][2] * n[0][2]
+        cos, sin = math.cos, math.sin
+        a0, a1, a2 = self.a
+        cp0, cp1, cp2 = self.cp
+        sp0, sp1, sp2 = self.sp
+        R0, R1, R2 = self.R
+        al0, al1, al2 = alpha
+        w0, w1, w2 = dalpha
+        # legs: Q_i, r_i, t_i
+        ca0, sa0 = cos(al0), sin(al0)
+        ca1, sa1 = cos(al1), sin(al1)
+        ca2, sa2 = cos(al2), sin(al2)
+        rad = R0 + a0 * ca0
+        q0x, q0y, q0z = rad * cp0, rad * sp0, a0 * sa0
+        rad = R1 + a1 * ca1
+        q1x, q1y, q1z = rad * cp1, rad * sp1, a1 * sa1
+        rad = R2 + a2 * ca2
+        q2x, q2y, q2z = rad * cp2, rad * sp2, a2 * sa2
+        r0x, r0y, r0z = ca0 * cp0, ca0 * sp0, sa0
+        r1x, r1y, r1z = ca1 * cp1, ca1 * sp1, sa1
+        r2x, r2y, r2z = ca2 * cp2, ca2 * sp2, sa2
+        t0x, t0y, t0z = -sa0 * cp0, -sa0 * sp0, ca0
+        t1x, t1y, t1z = -sa1 * cp1, -sa1 * sp1, ca1
+        t2x, t2y, t2z = -sa2 * cp2, -sa2 * sp2, ca2
+        # trilateration (forward_kinematics)
+        ux, uy, uz = q1x - q0x, q1y - q0y, q1z - q0z
+        vx, vy, vz = q2x - q0x, q2y - q0y, q2z - q0z
+        d = math.sqrt(ux * ux + uy * uy + uz * uz)
+        exx, exy, exz = ux / d, uy / d, uz / d
+        i_ = exx * vx + exy * vy + exz * vz
+        eyx, eyy, eyz = vx - i_ * exx, vy - i_ * exy, vz - i_ * exz
+        j_ = math.sqrt(eyx * eyx + eyy * eyy + eyz * eyz)
+        eyx, eyy, eyz = eyx / j_, eyy / j_, eyz / j_
+        ezx = exy * eyz - exz * eyy
+        ezy = exz * eyx - exx * eyz
+        ezz = exx * eyy - exy * eyx
+        b20, b21, b22 = self.b2
+        x = (b20 - b21 + d * d) / (2 * d)
+        y = (b20 - b22 + i_ * i_ + j_ * j_) / (2 * j_) - i_ * x / j_
+        z2 = b20 - x * x - y * y
+        if z2 < 0:
+            raise ValueError('forward kinematics: the forearm spheres do not meet for these arm '
+                             'angles')
+        z = math.sqrt(z2) if ezz >= 0 else -math.sqrt(z2)
+        px = q0x + x * exx + y * eyx + z * ezx
+        py = q0y + x * exy + y * eyy + z * ezy
+        pz = q0z + x * exz + y * eyz + z * ezz
+        # d_i = P - Q_i, n_i = d_j x d_k
+        d0x, d0y, d0z = px - q0x, py - q0y, pz - q0z
+        d1x, d1y, d1z = px - q1x, py - q1y, pz - q1z
+        d2x, d2y, d2z = px - q2x, py - q2y, pz - q2z
+        n0x, n0y, n0z = d1y * d2z - d1z * d2y, d1z * d2x - d1x * d2z, d1x * d2y - d1y * d2x
+        n1x, n1y, n1z = d2y * d0z - d2z * d0y, d2z * d0x - d2x * d0z, d2x * d0y - d2y * d0x
+        n2x, n2y, n2z = d0y * d1z - d0z * d1y, d0z * d1x - d0x * d1z, d0x * d1y - d0y * d1x
+        D = d0x * n0x + d0y * n0y + d0z * n0z
         if D == 0.0:
             raise ZeroDivisionError('parallel singularity: the forearms are coplanar')
-        Jc, dP = [], [0.0, 0.0, 0.0]
-        for i in range(3):
-            di, ti, ni = d[i], t[i], n[i]
-            s = self.a[i] * (di[0] * ti[0] + di[1] * ti[1] + di[2] * ti[2]) / D
-            col = (s * ni[0], s * ni[1], s * ni[2])
-            Jc.append(col)
-            w = dalpha[i]
-            dP[0] += col[0] * w
-            dP[1] += col[1] * w
-            dP[2] += col[2] * w
-        c = [0.0, 0.0, 0.0]
-        hP = [0.0, 0.0, -self.g_platform]
-        for i in range(3):
-            di, ri, ti, ni = d[i], r[i], t[i], n[i]
-            w = self.a[i] * dalpha[i]
-            e0, e1, e2 = dP[0] - w * ti[0], dP[1] - w * ti[1], dP[2] - w * ti[2]
-            gamma = (2 * (e0 * e0 + e1 * e1 + e2 * e2)
-                     + 2 * w * dalpha[i] * (di[0] * ri[0] + di[1] * ri[1] + di[2] * ri[2]))
-            f = -gamma / (2 * D)
-            kw = self.k[i] * dalpha[i] * dalpha[i]
-            for j in range(3):
-                c[j] += f * ni[j]
-                hP[j] -= kw * ri[j]
-        # reduced mass matrix (symmetric) and right-hand side, dot products written out
-        tJ = [[ti[0] * col[0] + ti[1] * col[1] + ti[2] * col[2] for col in Jc] for ti in t]
-        JJ = [[ci[0] * ck[0] + ci[1] * ck[1] + ci[2] * ck[2] for ck in Jc] for ci in Jc]
-        k, M_PP = self.k, self.M_PP
-        M = [[k[i] * tJ[i][j] + k[j] * tJ[j][i] + M_PP * JJ[i][j] for j in range(3)]
-             for i in range(3)]
-        rhs = []
-        for i in range(3):
-            M[i][i] += self.M_aa[i]
-            ci, ti = Jc[i], t[i]
-            rhs.append(tau[i] + self.g_arm[i] * math.cos(alpha[i])
-                       - (ci[0] * hP[0] + ci[1] * hP[1] + ci[2] * hP[2])
-                       - k[i] * (ti[0] * c[0] + ti[1] * c[1] + ti[2] * c[2])
-                       - M_PP * (ci[0] * c[0] + ci[1] * c[1] + ci[2] * c[2]))
-        return _solve3(M, rhs), P, dP
+        s = a0 * (d0x * t0x + d0y * t0y + d0z * t0z) / D
+        j0x, j0y, j0z = s * n0x, s * n0y, s * n0z
+        s = a1 * (d1x * t1x + d1y * t1y + d1z * t1z) / D
+        j1x, j1y, j1z = s * n1x, s * n1y, s * n1z
+        s = a2 * (d2x * t2x + d2y * t2y + d2z * t2z) / D
+        j2x, j2y, j2z = s * n2x, s * n2y, s * n2z
+        vx = 0.0 + j0x * w0 + j1x * w1 + j2x * w2
+        vy = 0.0 + j0y * w0 + j1y * w1 + j2y * w2
+        vz = 0.0 + j0z * w0 + j1z * w1 + j2z * w2
+        k0, k1, k2 = self.k
+        D2 = 2 * D
+        u = a0 * w0
+        e0, e1, e2 = vx - u * t0x, vy - u * t0y, vz - u * t0z
+        f0 = -(2 * (e0 * e0 + e1 * e1 + e2 * e2)
+               + 2 * u * w0 * (d0x * r0x + d0y * r0y + d0z * r0z)) / D2
+        u = a1 * w1
+        e0, e1, e2 = vx - u * t1x, vy - u * t1y, vz - u * t1z
+        f1 = -(2 * (e0 * e0 + e1 * e1 + e2 * e2)
+               + 2 * u * w1 * (d1x * r1x + d1y * r1y + d1z * r1z)) / D2
+        u = a2 * w2
+        e0, e1, e2 = vx - u * t2x, vy - u * t2y, vz - u * t2z
+        f2 = -(2 * (e0 * e0 + e1 * e1 + e2 * e2)
+               + 2 * u * w2 * (d2x * r2x + d2y * r2y + d2z * r2z)) / D2
+        cx = 0.0 + f0 * n0x + f1 * n1x + f2 * n2x
+        cy = 0.0 + f0 * n0y + f1 * n1y + f2 * n2y
+        cz = 0.0 + f0 * n0z + f1 * n1z + f2 * n2z
+        kw0, kw1, kw2 = k0 * w0 * w0, k1 * w1 * w1, k2 * w2 * w2
+        hx = 0.0 - kw0 * r0x - kw1 * r1x - kw2 * r2x
+        hy = 0.0 - kw0 * r0y - kw1 * r1y - kw2 * r2y
+        hz = -self.g_platform - kw0 * r0z - kw1 * r1z - kw2 * r2z
+        # reduced mass matrix: tJ[i][j] = t_i . J_j, JJ[i][j] = J_i . J_j
+        tJ00 = t0x * j0x + t0y * j0y + t0z * j0z
+        tJ01 = t0x * j1x + t0y * j1y + t0z * j1z
+        tJ02 = t0x * j2x + t0y * j2y + t0z * j2z
+        tJ10 = t1x * j0x + t1y * j0y + t1z * j0z
+        tJ11 = t1x * j1x + t1y * j1y + t1z * j1z
+        tJ12 = t1x * j2x + t1y * j2y + t1z * j2z
+        tJ20 = t2x * j0x + t2y * j0y + t2z * j0z
+        tJ21 = t2x * j1x + t2y * j1y + t2z * j1z
+        tJ22 = t2x * j2x + t2y * j2y + t2z * j2z
+        JJ00 = j0x * j0x + j0y * j0y + j0z * j0z
+        JJ01 = j0x * j1x + j0y * j1y + j0z * j1z
+        JJ02 = j0x * j2x + j0y * j2y + j0z * j2z
+        JJ10 = j1x * j0x + j1y * j0y + j1z * j0z
+        JJ11 = j1x * j1x + j1y * j1y + j1z * j1z
+        JJ12 = j1x * j2x + j1y * j2y + j1z * j2z
+        JJ20 = j2x * j0x + j2y * j0y + j2z * j0z
+        JJ21 = j2x * j1x + j2y * j1y + j2z * j1z
+        JJ22 = j2x * j2x + j2y * j2y + j2z * j2z
+        M_PP = self.M_PP
+        Maa0, Maa1, Maa2 = self.M_aa
+        m00 = k0 * tJ00 + k0 * tJ00 + M_PP * JJ00 + Maa0
+        m01 = k0 * tJ01 + k1 * tJ10 + M_PP * JJ01
+        m02 = k0 * tJ02 + k2 * tJ20 + M_PP * JJ02
+        m10 = k1 * tJ10 + k0 * tJ01 + M_PP * JJ10
+        m11 = k1 * tJ11 + k1 * tJ11 + M_PP * JJ11 + Maa1
+        m12 = k1 * tJ12 + k2 * tJ21 + M_PP * JJ12
+        m20 = k2 * tJ20 + k0 * tJ02 + M_PP * JJ20
+        m21 = k2 * tJ21 + k1 * tJ12 + M_PP * JJ21
+        m22 = k2 * tJ22 + k2 * tJ22 + M_PP * JJ22 + Maa2
+        ga0, ga1, ga2 = self.g_arm
+        tau0, tau1, tau2 = tau
+        h0 = (tau0 + ga0 * ca0 - (j0x * hx + j0y * hy + j0z * hz)
+              - k0 * (t0x * cx + t0y * cy + t0z * cz) - M_PP * (j0x * cx + j0y * cy + j0z * cz))
+        h1 = (tau1 + ga1 * ca1 - (j1x * hx + j1y * hy + j1z * hz)
+              - k1 * (t1x * cx + t1y * cy + t1z * cz) - M_PP * (j1x * cx + j1y * cy + j1z * cz))
+        h2 = (tau2 + ga2 * ca2 - (j2x * hx + j2y * hy + j2z * hz)
+              - k2 * (t2x * cx + t2y * cy + t2z * cz) - M_PP * (j2x * cx + j2y * cy + j2z * cz))
+        # solve by cofactors: c0 = m1 x m2, c1 = m2 x m0, c2 = m0 x m1 (rows)
+        c00, c01, c02 = m11 * m22 - m12 * m21, m12 * m20 - m10 * m22, m10 * m21 - m11 * m20
+        c10, c11, c12 = m21 * m02 - m22 * m01, m22 * m00 - m20 * m02, m20 * m01 - m21 * m00
+        c20, c21, c22 = m01 * m12 - m02 * m11, m02 * m10 - m00 * m12, m00 * m11 - m01 * m10
+        det = m00 * c00 + m01 * c01 + m02 * c02
+        if det == 0.0:
+            raise ZeroDivisionError('singular 3x3 matrix (parallel singularity: the forearms are '
+                                    'coplanar)')
+        dd0 = c00 / det * h0 + c10 / det * h1 + c20 / det * h2
+        dd1 = c01 / det * h0 + c11 / det * h1 + c21 / det * h2
+        dd2 = c02 / det * h0 + c12 / det * h1 + c22 / det * h2
+        return [dd0, dd1, dd2], [px, py, pz], [vx, vy, vz]
 
 
 def _dot(u, v):
@@ -410,8 +562,3 @@ def _inverse3(m):
         raise ZeroDivisionError('singular 3x3 matrix (parallel singularity: the forearms are '
                                 'coplanar)')
     return [[c0[j] / det, c1[j] / det, c2[j] / det] for j in range(3)]
-
-
-def _solve3(m, rhs):
-    inv = _inverse3(m)
-    return [_dot(inv[j], rhs) for j in range(3)]

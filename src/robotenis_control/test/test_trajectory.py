@@ -56,3 +56,14 @@ def test_bad_inputs_are_named():
         tr.Chain(np.zeros((1, 3)), 1.0, 1.0)
     with pytest.raises(ValueError, match='positive'):
         tr.duration(0.1, 0.0, 1.0)
+
+
+def test_one_time_in_floats_is_the_array_sample():
+    """Segment.at (the controller's tick) gives sample's values exactly, before, in and after."""
+    seg = tr.segment([0.0, 0.01, 0.75], [-0.2, 0.2, 0.8], 0.1, 2.0, 4 * 9.81)
+    for t in np.linspace(0.0, seg.t1 + 0.1, 2001):
+        for got, want in zip(seg.at(float(t)), seg.sample(float(t))[:3]):
+            np.testing.assert_array_equal(got, want)
+    still = tr.Segment(np.array([0.1, 0.0, 0.7]), np.array([0.1, 0.0, 0.7]), 0.0, 0.0)
+    for got, want in zip(still.at(0.5), still.sample(0.5)[:3]):
+        np.testing.assert_array_equal(got, want)

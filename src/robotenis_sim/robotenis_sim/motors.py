@@ -106,6 +106,7 @@ class SimulatedMotors:
         self.joint_effects = joint_effects
         self.t = 0.0
         self.alpha = [float(v) for v in self.theta0 + np.asarray(Theta_start, dtype=float)]
+        self._theta0 = self.theta0.tolist()
         self.dalpha = [0.0, 0.0, 0.0]
         self.command = [0.0, 0.0, 0.0]
         self.brakes = True
@@ -137,28 +138,35 @@ class SimulatedMotors:
         self.t += self.dt
 
     def _increments(self):
-        alpha = np.asarray(self.alpha)
+        """Return the increments (list of 3 floats) before quantisation and noise."""
         if self.joint_effects is None:
-            return alpha - self.theta0
-        return np.asarray(self.joint_effects(alpha, np.asarray(self.dalpha)))
+            return [a - t0 for a, t0 in zip(self.alpha, self._theta0)]
+        return np.asarray(self.joint_effects(np.asarray(self.alpha), np.asarray(self.dalpha)),
+                          dtype=float).tolist()
 
     def _quantised(self, Theta):
         q = self.resolver.resolution
-        return np.round(Theta / q) * q
+        return [round(v / q) * q if math.isfinite(v) else v for v in Theta]
 
     def read(self):
         """
-        Read the resolvers: (Theta, dTheta).
+        Read the resolvers: (Theta, dTheta), arrays of 3.
 
         Theta: resolver increments (rad, quantised and noisy); dTheta: the drives' speed estimate,
-        the difference of the last two readings over dt (rad/s).
+        the difference of the last two readings over dt (rad/s). In floats: rounding half to even
+        as numpy's, so the same readings as with arrays.
         """
-        noise = (self.rng.normal(scale=self.resolver.noise, size=3) if self.resolver.noise > 0
-                 else 0.0)
-        Theta = self._quantised(self._increments() + noise)
-        dTheta = (Theta - self._last_reading) / self.dt
+        increments = self._increments()
+        if self.resolver.noise > 0:
+            noise = self.rng.normal(scale=self.resolver.noise, size=3).tolist()
+            increments = [v + n for v, n in zip(increments, noise)]
+        else:
+            increments = [v + 0.0 for v in increments]
+        Theta = self._quantised(increments)
+        dt, last = self.dt, self._last_reading
+        dTheta = [(v - w) / dt for v, w in zip(Theta, last)]
         self._last_reading = Theta
-        return Theta, dTheta
+        return np.array(Theta), np.array(dTheta)
 
     def effector(self):
         """Return the TRUE effector position and velocity (m, m/s, base frame): scoring only."""

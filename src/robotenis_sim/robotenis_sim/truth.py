@@ -281,16 +281,39 @@ class JointReadings:
     for backlash) and applies the truth's joint effects; without effects the increments are
     alpha - theta0. On a reversal the reading steps by the backlash width at once (the gap is not
     simulated as a state); 0.02 rad/s (1 cm/s at the elbow) keeps the controller's dither at rest
-    from flipping it.
+    from flipping it. Backlash and gear error alone (no compliance, no eccentricity) are computed
+    in floats, the simulator reading every 1 ms: the operations of ``Truth.increments``, in its
+    order, so the same increments (4 us against 14 us).
     """
+
+    PLAIN = {'backlash', 'joint_scale'}      # the joint effects the float path computes
 
     def __init__(self, truth, min_speed=0.02):
         self.truth, self.min_speed = truth, min_speed
         self.direction = np.ones(3)
+        joint = set(truth.effects) & {'backlash', 'joint_scale', 'gravity_compliance',
+                                      'joint_eccentricity'}
+        self._plain = joint <= self.PLAIN
+        fx = truth.effects
+        self._half_backlash = (0.5 * np.asarray(fx.get('backlash', np.zeros(3)))).tolist()
+        self._gain = (1 + np.asarray(fx.get('joint_scale', np.zeros(3)), dtype=float)).tolist()
+        self._theta0 = np.asarray(truth.geometry.theta0, dtype=float).tolist()
 
     def __call__(self, alpha, dalpha):
+        if self._plain:
+            return np.array(self._plain_increments(np.asarray(alpha, dtype=float).tolist(),
+                                                   np.asarray(dalpha, dtype=float).tolist()))
         moving = np.abs(dalpha) > self.min_speed
         self.direction = np.where(moving, np.sign(dalpha), self.direction)
         P = (delta.forward(self.truth.geometry, alpha)
              if 'gravity_compliance' in self.truth.effects else None)
         return self.truth.increments(alpha, self.direction, P)
+
+    def _plain_increments(self, alpha, dalpha):
+        direction = self.direction.tolist()
+        for j, v in enumerate(dalpha):
+            if abs(v) > self.min_speed:
+                direction[j] = 1.0 if v > 0 else -1.0
+        self.direction = np.array(direction)
+        return [g * ((a + b * d) - t0) + 0.0 for a, b, d, g, t0
+                in zip(alpha, self._half_backlash, direction, self._gain, self._theta0)]
