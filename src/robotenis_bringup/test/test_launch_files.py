@@ -98,3 +98,12 @@ def test_sim_time_puts_the_simulator_and_the_visual_loop_in_lockstep():
     assert calibration['sim_motors']['camera_rate'] == 0.0 and 'pbvs_tracker' not in calibration
     real = launch_file.load(launch_file.find('calibration.launch.yaml'), {'sim': 'false'})
     assert {n.name for n in real} == {'sphere_detector', 'motion_controller', 'calibration'}
+
+
+def test_the_rest_method_argument_defaults_to_the_detector_s_own():
+    """The launch files pass rest_method to the detector: their default must be its default."""
+    detector = table('robotenis_vision', 'sphere_detector')['rest_method'][0]
+    for path in LAUNCH_FILES:
+        defaults = {name: default for name, default, _ in launch_file.arguments(path)}
+        if 'rest_method' in defaults:
+            assert defaults['rest_method'] == detector, f'{path}: rest_method'

@@ -140,10 +140,12 @@ def ros_session(nominal, truth, args):
           f'settle {args.settle} s, the robot hiding {args.effect}; simulated time, the simulator '
           'and the controller in lockstep at 1 kHz')
     top = os.environ.get('ROBOTENIS_TOP', os.getcwd())
-    nodes = launch_file.load(launch_file.find('calibration.launch.yaml'), {
-        'sim_time': 'true', 'truth_path': truth_path, 'params_file': params_path,
-        'description_path': description.config_path('nominal.yaml'),
-        'bags_dir': out, 'results_dir': out})
+    launch_args = {'sim_time': 'true', 'truth_path': truth_path, 'params_file': params_path,
+                   'description_path': description.config_path('nominal.yaml'),
+                   'bags_dir': out, 'results_dir': out}
+    if getattr(args, 'rest_method', None):
+        launch_args['rest_method'] = args.rest_method
+    nodes = launch_file.load(launch_file.find('calibration.launch.yaml'), launch_args)
     launcher = Launcher(nodes, os.path.join(top, 'install'), os.path.join(top, 'log', 'demo'))
     started = time.perf_counter()
     launcher.start()
@@ -173,6 +175,10 @@ def main(argv=None):
     parser.add_argument('--settle', type=float, default=0.3, help='settle time at each pose (s)')
     parser.add_argument('--effect', default='backlash', choices=sorted(LIVE_EFFECTS),
                         help='what the simulated robot hides in the session through ROS')
+    parser.add_argument('--rest-method',
+                        help="the detector's method at rest in the session through ROS (the "
+                             "launch argument rest_method; default the detector's own, model; "
+                             'conic: the fast one)')
     args = parser.parse_args(argv)
     nominal, truth = description.nominal(), sim_truth.load()
     identification(nominal, truth, args)
