@@ -71,6 +71,8 @@ PARAMETERS = {
                          'the robot description the session starts from'),
     'sphere_guess': (UNSET, "m, base frame: the ball's rough position (a few cm); required"),
     'replan': (True, 'plan the poses again around the ball the first six rests saw'),
+    'max_range': (poses.IMAGE_MAX_RANGE, 'm: the farthest the ball is planned from the camera (a '
+                                         "rest's depth error grows as its square: see poses)"),
     'bags_dir': ('bags', 'folder of the recorded sessions'),
     'results_dir': ('bags', 'folder of the calibration results'),
     'num_poses': (300, 'poses of a session (a request may ask for others)'),
@@ -281,7 +283,9 @@ class CalibrationNode(Node):
         if refused is not None:
             raise ValueError(f'request refused, nothing was moved: {refused}')
         rng = np.random.default_rng(request.seed)
-        planned = poses.select(request.pose_selection or 'boundary', declared, guess, n, rng)
+        max_range = self.get_parameter('max_range').value
+        planned = poses.select(request.pose_selection or 'boundary', declared, guess, n, rng,
+                               max_range)
         stamp = time.strftime('%Y%m%d-%H%M%S')
         bag = request.bag_path or os.path.join(self.get_parameter('bags_dir').value,
                                                f'session-{stamp}')
@@ -298,7 +302,7 @@ class CalibrationNode(Node):
             moved = np.linalg.norm(refined - guess)
             try:
                 again = poses.select(request.pose_selection or 'boundary', declared, refined, n,
-                                     rng)
+                                     rng, max_range)
             except ValueError as e:
                 self.get_logger().warn(f'ball guess refined from {len(rests)} rests, but {e}:'
                                        ' the plan is kept')

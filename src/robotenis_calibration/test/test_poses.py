@@ -1,5 +1,6 @@
 """Pose planning: the ball guess refined from measured rests."""
 import numpy as np
+import pytest
 
 from robotenis_calibration import poses
 from robotenis_kinematics import delta, description
@@ -24,3 +25,15 @@ def test_the_refined_guess_is_where_the_rests_saw_the_ball():
     model_error = np.linalg.norm(delta.forward(declared, declared.theta0 + Theta) - P, axis=1)
     assert np.linalg.norm(guess - S) <= model_error.max()
     assert model_error.max() < 0.2 * np.linalg.norm(rough - S)
+
+
+def test_poses_keep_the_ball_within_max_range():
+    """Both selections plan the ball within max_range; a max_range below the nearest is refused."""
+    truth, declared = sim_truth.load(), description.nominal()
+    guess = truth.sphere_position - truth.camera_translation
+    for method in poses.SELECTIONS:
+        P = poses.select(method, declared, guess, 40, np.random.default_rng(4), max_range=0.35)
+        z = poses.predicted_sphere(declared, guess, P)[:, 2]
+        assert np.all((z >= poses.PLAN_RANGE[0]) & (z <= 0.35))
+    with pytest.raises(ValueError, match='max_range'):
+        poses.boundary(declared, guess, 10, np.random.default_rng(4), max_range=0.15)
