@@ -95,15 +95,26 @@ def test_sim_time_puts_the_simulator_and_the_visual_loop_in_lockstep():
     calibration = {n.name: n.parameters
                    for n in launch_file.load(launch_file.find('calibration.launch.yaml'),
                                              {'sim_time': 'true'})}
-    assert calibration['sim_motors']['camera_rate'] == 0.0 and 'pbvs_tracker' not in calibration
+    assert 'pbvs_tracker' not in calibration and calibration['sim_motors']['camera_rate'] == 120.0
+    # a calibration session waits for the detector at rest; the tracking loop for its commands
+    assert calibration['sim_motors']['visual_answer'] == 'detection'
+    assert calibration['sim_motors']['visual_rest_speed'] > 0
+    assert nodes['sim_motors']['visual_answer'] == 'command'
     real = launch_file.load(launch_file.find('calibration.launch.yaml'), {'sim': 'false'})
     assert {n.name for n in real} == {'sphere_detector', 'motion_controller', 'calibration'}
 
 
-def test_the_rest_method_argument_defaults_to_the_detector_s_own():
-    """The launch files pass rest_method to the detector: their default must be its default."""
-    detector = table('robotenis_vision', 'sphere_detector')['rest_method'][0]
+@pytest.mark.parametrize('argument, package, executable, parameter', [
+    ('rest_method', 'robotenis_vision', 'sphere_detector', 'rest_method'),
+    ('visual_answer', 'robotenis_sim', 'sim_motors', 'visual_answer'),
+    ('visual_delay', 'robotenis_sim', 'sim_motors', 'visual_delay'),
+    ('visual_timeout', 'robotenis_sim', 'sim_motors', 'visual_timeout'),
+    ('visual_rest_speed', 'robotenis_sim', 'sim_motors', 'visual_rest_speed')])
+def test_arguments_passed_on_to_a_node_default_to_its_own(argument, package, executable,
+                                                          parameter):
+    """A launch argument that only passes a node parameter on must default to the node's."""
+    own = table(package, executable)[parameter][0]
     for path in LAUNCH_FILES:
         defaults = {name: default for name, default, _ in launch_file.arguments(path)}
-        if 'rest_method' in defaults:
-            assert defaults['rest_method'] == detector, f'{path}: rest_method'
+        if argument in defaults:
+            assert yaml.safe_load(str(defaults[argument])) == own, f'{path}: {argument}'

@@ -13,7 +13,10 @@ When the simulated motors step: on the wall clock, or in lockstep with the nodes
   arrived, waiting at most ``visual_timeout`` wall seconds: the visual loop then acts within
   visual_delay of simulated time, as a real camera pipeline acts within its frame. It waits only
   while the loop answers: after a frame without an answer (ball lost, tracker off) it lets frames
-  go by unwaited until the next answer.
+  go by unwaited until the next answer. The caller may say the robot moves (``due(..., still=
+  False)``): its frames then go by unwaited too, the loop's answers still counted (a calibration
+  session waits for the detector at rest only, where the detector's accurate fit is slow and a
+  simulator running ahead would only make frames for it to drop).
 
 The clock is a parameter (``clock()``: wall seconds, monotonic), so the schedule can be tested
 without sleeping.
@@ -75,8 +78,12 @@ class StepSchedule:
         self.visual_answers = True
         return self.visual_since is not None
 
-    def due(self, t_sim, steps):
-        """Return (steps to run now, [log notes]) at simulated time t_sim after ``steps`` steps."""
+    def due(self, t_sim, steps, still=True):
+        """
+        Return (steps to run now, [log notes]) at simulated time t_sim after ``steps`` steps.
+
+        ``still``: whether the visual lockstep may wait for a frame's answer (see the module).
+        """
         n, notes = self._wall_due(steps), []
         if not (n and self.p.lockstep):
             return n, notes
@@ -87,7 +94,7 @@ class StepSchedule:
                 return 0, notes
             notes.append('lockstep: no command for the last reading, stepping on')
         self.waiting_since = None
-        if self.frames is not None and self._waiting_for_camera(t_sim, notes):
+        if self.frames is not None and self._waiting_for_camera(t_sim, notes, still):
             return 0, notes
         return 1, notes
 
@@ -98,10 +105,13 @@ class StepSchedule:
         target = math.floor((self.clock() - self.start) * speed / self.p.dt)
         return max(0, min(target - steps, self.p.max_catch_up))
 
-    def _waiting_for_camera(self, t_sim, notes):
+    def _waiting_for_camera(self, t_sim, notes, still=True):
         """Return True while the next step would pass a frame's deadline before its command."""
         deadline = t_sim + self.p.dt - self.p.visual_delay + 1e-9
         while self.exposures and self.exposures[0] <= deadline:
+            if not still:                 # moving: the frame goes by, the loop still answering
+                self.exposures.popleft()
+                continue
             if self.visual_answers:
                 now = self.clock()
                 self.visual_since = self.visual_since or now

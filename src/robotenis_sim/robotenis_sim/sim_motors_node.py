@@ -14,9 +14,15 @@ Clock modes (robotenis_sim.lockstep): wall (default), a steady timer running the
 simulated (``publish_clock``): the node owns /clock and publishes the simulated time every
 ``clock_decimation`` steps, ``speed`` simulated seconds per wall second (0: as fast as possible),
 with ``lockstep`` one step per command answering the last reading, and with ``camera_rate`` > 0
-the visual lockstep that waits for each frame's cmd_vel_cartesian. Every node on /clock pays for
-each clock message (about 0.1 ms in rclpy): 250 Hz is enough for a 120 Hz camera and costs a
-quarter of 1 kHz.
+the visual lockstep that waits for each frame's answer: the tracking loop's cmd_vel_cartesian
+(``visual_answer`` 'command'), or the detector's sphere/position ('detection'), and with
+``visual_rest_speed`` > 0 only while every arm turns slower than that. A calibration session
+waits for the detector at rest: it runs on the wall clock, and its accurate fit at rest takes
+longer than a frame, so a simulator faster than real time would run ahead of it, make frames for
+it to drop and simulated time for every node to spend (1.9 s of simulated time per rest instead
+of 0.6 s), and the session's time-outs, in simulated time, would skip poses it had not measured
+yet. Every node on /clock pays for each clock message (about 0.1 ms in rclpy): 250 Hz is enough
+for the nodes' timers and costs a quarter of 1 kHz.
 """
 import sys
 
@@ -58,7 +64,13 @@ PARAMETERS = {
     'camera_rate': (0.0, 'Hz: visual lockstep on the frames of this rate (0: off)'),
     'visual_delay': (1.0 / 120.0, 's: a frame must be answered within this simulated time'),
     'visual_timeout': (0.1, "wall s to wait for a frame's command"),
+    'visual_answer': ('command', "what answers a frame in visual lockstep: 'command' "
+                                 "(cmd_vel_cartesian) or 'detection' (sphere/position)"),
+    'visual_rest_speed': (0.0, 'rad/s: in visual lockstep, wait for frames only while every arm '
+                               'turns slower than this (0: always)'),
 }
+VISUAL_ANSWERS = {'command': (TwistStamped, 'cmd_vel_cartesian'),
+                  'detection': (PointStamped, 'sphere/position')}
 
 
 class SimMotorsNode(Node):
@@ -90,8 +102,13 @@ class SimMotorsNode(Node):
         self.clock_pub = (self.create_publisher(ClockMsg, '/clock', 10) if self.publish_clock
                           else None)
         self.create_subscription(JointState, 'motor_velocity_cmd', self.on_command, 10)
+        if p['visual_answer'] not in VISUAL_ANSWERS:
+            raise ValueError(f"visual_answer must be one of {', '.join(VISUAL_ANSWERS)}, "
+                             f"got {p['visual_answer']!r}")
+        self.rest_speed = float(p['visual_rest_speed'])
         if self.schedule.frames is not None:
-            self.create_subscription(TwistStamped, 'cmd_vel_cartesian', self.on_visual_command, 10)
+            answer_type, topic = VISUAL_ANSWERS[p['visual_answer']]
+            self.create_subscription(answer_type, topic, self.on_visual_command, 10)
         self.steps = 0
         self.last_stamp = None
         self.publish_reading(self.sim.read())
@@ -137,10 +154,11 @@ class SimMotorsNode(Node):
 
     def on_visual_command(self, msg):
         if self.schedule.visual_answer(stamp_seconds(msg.header.stamp)):
-            self.on_timer()             # the step that waited for this command
+            self.on_timer()             # the step that waited for this answer
 
     def on_timer(self):
-        n, notes = self.schedule.due(self.sim.t, self.steps)
+        still = self.rest_speed <= 0 or max(map(abs, self.sim.dalpha)) < self.rest_speed
+        n, notes = self.schedule.due(self.sim.t, self.steps, still)
         for note in notes:
             self.get_logger().warn(note, throttle_duration_sec=1.0)
         for _ in range(n):

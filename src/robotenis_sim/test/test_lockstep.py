@@ -92,3 +92,13 @@ def test_no_visual_lockstep_without_lockstep(rate):
     schedule, _ = make(simulated=True, speed=0.0, camera_rate=rate)
     schedule.sampled(0.0)
     assert schedule.frames is None and not schedule.exposures
+
+
+def test_while_the_robot_moves_frames_go_by_unwaited_and_the_loop_still_counts_as_answering():
+    schedule = visual(FakeClock())
+    schedule.visual_answer(-1.0)                      # the detector answers
+    assert schedule.due(0.0075, 0, still=False) == (1, [])   # moving: the frame at 0 goes by
+    assert schedule.visual_answers and schedule.exposures[0] == pytest.approx(0.012)
+    assert schedule.due(0.020, 0, still=True) == (0, [])     # at rest: the frame at 12 ms waits
+    assert schedule.visual_answer(0.012) is True
+    assert schedule.due(0.020, 0, still=True) == (1, [])
