@@ -7,6 +7,7 @@ are checked against these tables (robotenis_bringup's tests). A service whose an
 (a calibration session) is a ``DeferredService``: answered later, without blocking the executor.
 """
 import functools
+import signal
 import sys
 
 from rcl_interfaces.msg import ParameterDescriptor
@@ -53,7 +54,8 @@ def spin(make_node, name, fatal=(ValueError,), args=None, finish=None, events=Fa
     the controller in lockstep). It serves no coroutine (async) service callback and no guard
     condition, and its spin() does not return on SIGINT or SIGTERM: it is spun in slices of
     EVENTS_SLICE (until a future that never completes, so that a slice runs every callback due
-    in it) while the context is up.
+    in it) while the context is up and no SIGINT came (its handler only notes it: raised in a
+    callback, KeyboardInterrupt would be logged by the executor as a fatal callback error).
     """
     rclpy.init(args=args)
     node = None
@@ -62,9 +64,14 @@ def spin(make_node, name, fatal=(ValueError,), args=None, finish=None, events=Fa
         node = make_node()
         executor.add_node(node)
         if events:
-            never = Future()
-            while rclpy.ok():
-                executor.spin_until_future_complete(never, timeout_sec=EVENTS_SLICE)
+            stop = []
+            previous = signal.signal(signal.SIGINT, lambda *_: stop.append(True))
+            try:
+                never = Future()
+                while rclpy.ok() and not stop:
+                    executor.spin_until_future_complete(never, timeout_sec=EVENTS_SLICE)
+            finally:
+                signal.signal(signal.SIGINT, previous)
         else:
             executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
