@@ -60,7 +60,7 @@ def scored(label, d, session, robot):
             f'{at:6.3f} mm ({less:.3f} less offset), workspace {whole:6.3f} mm')
 
 
-def links(effect, robot, args):
+def links(robot, args):
     """Return lines: the chain's links apart (noise model alone, images without dynamics)."""
     out = []
     # the live session plans around the ball its first rests saw (poses.refined_guess: the ball
@@ -114,7 +114,7 @@ def main():
         for effect in args.effects:
             robot = sim_truth.with_effects(sim_truth.load(), **demo.LIVE_EFFECTS[effect])
             apart.append(f'  {effect}')
-            apart += links(effect, robot, args)
+            apart += links(robot, args)
             print('\n'.join(apart[-5:]), flush=True)
             if args.images_only:
                 continue
