@@ -18,11 +18,11 @@ radius is z^2 e / (f R) of depth), and it is what a calibration cannot average a
 spread is what tells a camera's depth scale from the robot's. Measured on the simulated robot with
 rendered images (as ``./robotenis bench live --images-only`` does, 90 poses, seven hidden effects,
 seeds 2 and 3, kept out of that benchmark), the ball within 0.40 m rather than 0.55 m took the
-calibration's FK error at the rests (less their common offset) from 0.21 to 0.07 mm (median of
-14 sessions) and the effects named right from 2 to 6 of 14. Through the noise model alone (an
-unbiased detector) the nearer poses cost an eccentricity's form in 2 seeds of 3 (1, 2, 3) and a
-camera depth scale's in 1. So a session measured through the product's detector (the calibration
-node) plans within IMAGE_MAX_RANGE, and the studies that simulate an unbiased one within PLAN_RANGE.
+calibration's FK error at the rests (less their common offset) from 0.21 to 0.07 mm (median of 14
+sessions) and the effects named right from 2 to 6 of 14. Through the noise model alone (an unbiased
+detector) the nearer poses cost an eccentricity's form in 2 seeds of 3 (1, 2, 3) and a camera depth
+scale's in 1. So a session measured through the product's detector (the calibration node) plans
+within IMAGE_MAX_RANGE, and the studies that simulate an unbiased one within PLAN_RANGE.
 """
 import numpy as np
 

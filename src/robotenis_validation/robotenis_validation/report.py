@@ -107,11 +107,12 @@ def section_residual_loop(nominal, truth, n, seeds, out_dir, image_poses, image_
             'claimed nothing). Errors are the held-out RMS 3D distances between where each model '
             'puts the effector and where the camera saw it. The first columns measure each rest '
             "through the noise model (Table 3's averaged frames); the last three through "
-            f'rendered images and the product\'s detector, as the live session does ({image_seeds} '
-            f'sessions of {image_poses} poses planned as the calibration node plans them, the '
-            "ball within 0.40 m): each rest carries the detector's bias at its true pose, which "
-            'is what limits the live chain (live_links), and the last column is the calibrated '
-            "FK's error against the truth at the rests, less their common offset.</p>")
+            "rendered images and the product's detector, as the live session does "
+            f'({image_seeds} sessions of {image_poses} poses planned as the calibration node '
+            "plans them, the ball within 0.40 m): each rest carries the detector's bias at its "
+            'true pose, which is what limits the live chain (live_links), and the last column is '
+            "the calibrated FK's error against the truth at the rests, less their common "
+            'offset.</p>')
     text += table(['undeclared effect', 'named', 'nominal (mm)', 'plain 15-parameter (mm)',
                    'final (mm)', 'named, images', 'final, images (mm)',
                    'FK at the rests, images (mm)'], rows)
@@ -221,7 +222,7 @@ def section_static(nominal, truth, n, quick, out_dir, say):
     return (f"<p>The robot's truth carries an undeclared gear error ({ISO_EFFECT}: "
             f'{STUDY[ISO_EFFECT][ISO_EFFECT]}); the plain and final models are calibrated from '
             f'one static session of {n} planned poses, measured through the noise model (the '
-            f'first plain and final rows) or through rendered images and the product\'s detector '
+            "first plain and final rows) or through rendered images and the product's detector "
             f'as the live session measures ({len(images)} rests; effects claimed: '
             f'{", ".join(d_images.effects) or "none"}): the paper calibrated from its images, so '
             'the rows "through images" with the rendered circles are the ones to set beside its '
