@@ -12,10 +12,12 @@ itself carries) and with the mcap library's reader, and its contract topics carr
 types.
 
 Time bounds. The session stops once detections have been silent for longer than a pose can last,
-session_limits.pose_time_limit: 6.4 s of simulated time here. The response states the silence it
-saw, which must not exceed that limit by more than the node's 0.01 s timer tick. The wall-clock
-bounds only guard against a hang (the claim is on simulated time, which runs slower than the wall
-on a loaded machine): 120 s for the first two rests, 120 s from the kill to the client's exit.
+session_limits.pose_time_limit: 6.4 s here, on simulated time and on the wall clock alike (the
+simulator runs ahead of the wall when nothing waits for it). The response states the silence it
+saw, the shorter of the two, which must exceed that limit by no more than the node's 0.01 s timer
+tick on simulated time, or on the wall clock the time between two of its timer callbacks (bounded
+here by WALL_TICK_S, a guard on a loaded machine). The other wall-clock bounds only guard against a
+hang: 120 s for the first two rests, 120 s from the kill to the client's exit.
 """
 import os
 import random
@@ -41,6 +43,7 @@ TIMEOUT_S = 3.0                     # move_timeout and measure_timeout of the ca
 REST_WAIT_S = 120.0
 STOP_WAIT_S = 120.0
 TICK_S = 0.01                       # the calibration node's timer period
+WALL_TICK_S = 0.5                   # guard: wall time between two of its callbacks
 CONTRACT = {'/robot_description': 'std_msgs/msg/String',
             '/joint_states': 'sensor_msgs/msg/JointState',
             '/sphere/position': 'geometry_msgs/msg/PointStamped'}
@@ -103,11 +106,13 @@ def test_the_session_stops_naming_the_silent_detector(stopped_session):
                                                         move_timeout=TIMEOUT_S,
                                                         measure_timeout=TIMEOUT_S))
     assert status == 1, err
-    found = re.search(r'no message on sphere/detection for ([0-9.]+) s, longer than a pose can '
-                      r'last', err)
+    found = re.search(r'no message on sphere/detection for ([0-9.]+) s \(([0-9.]+) s of robot '
+                      r'time\), longer than a pose can last', err)
     assert found, err
+    silence, robot = float(found.group(1)), float(found.group(2))
     # printed to 0.1 s: within half of that of (limit, limit + one tick]
-    assert limit - 0.05 <= float(found.group(1)) <= limit + TICK_S + 0.05
+    assert limit - 0.05 <= silence <= limit + max(TICK_S, WALL_TICK_S) + 0.05
+    assert robot >= silence - 0.1
     assert 'no result written, the bag is kept' in err
     assert not results.exists() or not any(results.glob('*.yaml')), 'a result was written'
     assert bag.is_dir()

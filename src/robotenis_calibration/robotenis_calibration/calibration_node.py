@@ -315,7 +315,8 @@ class CalibrationNode(Node):
         self.session = SimpleNamespace(request=request, answer=answer, planned=planned, bag=bag,
                                        result_path=result_path)
         on_replan = replan if self.get_parameter('replan').value else None
-        self.runner = SessionRunner(planned, config, on_replan)
+        # The wall clock too: on simulated time a detector's silence must also be the wall's.
+        self.runner = SessionRunner(planned, config, on_replan, clock=time.monotonic)
         self.runner.start(self.now())
         self.run_actions()                  # the first goal, now
 

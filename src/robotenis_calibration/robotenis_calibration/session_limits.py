@@ -12,8 +12,9 @@ a pose can last is the session runner's own time-outs end to end (``pose_time_li
 whose ball is out of view is shorter (it is skipped after ``no_ball_time``). Joint states flow at
 every moment of a pose, so a pose never explains their silence; detections stop while the ball is
 out of view, so a silence that long means the detector stopped, or the ball was out of view at
-every pose of that time. With the demo's settings (0.3 s settle) the limit is 20.4 s, against
-about 2 s for a measured pose.
+every pose of that time. The silence is counted on the robot's clock and on the wall clock, the
+shorter of the two (``silence``). With the demo's settings (0.3 s settle) the limit is 20.4 s,
+against about 2 s for a measured pose.
 """
 from robotenis_calibration.pipeline import MIN_POSES
 from robotenis_calibration.rests import RestParameters
@@ -35,6 +36,17 @@ def pose_time_limit(config):
     return config.move_timeout + config.still_time + config.settle_time + config.measure_timeout
 
 
-def silent_inputs(last_times, now, limit):
-    """Return the names in ``last_times`` ({name: s}) silent for longer than ``limit`` s at now."""
-    return [name for name, t in last_times.items() if now - t > limit]
+def silence(robot, wall=None):
+    """
+    Return how long (s) an input has been silent, given ``robot`` and ``wall`` clocks' seconds.
+
+    A dead input is silent on both. A simulator that runs faster than real time makes frames
+    faster, on its clock, than a detector on the wall clock answers them: a live detector then
+    looks silent on the robot's clock alone. On a real robot the two clocks agree.
+    """
+    return robot if wall is None else min(robot, wall)
+
+
+def silent_inputs(silences, limit):
+    """Return the names in ``silences`` ({name: s}) silent for longer than ``limit`` s."""
+    return [name for name, s in silences.items() if s > limit]

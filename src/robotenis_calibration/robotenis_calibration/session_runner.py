@@ -9,6 +9,11 @@ with the reason. After ``replan_after`` measured rests the poses still to come m
 silent for longer than a pose can last (robotenis_calibration.session_limits) stops the session:
 ``failure`` then says which, and the session is done without its remaining poses. The
 calibration node feeds it messages and executes the actions it returns.
+
+Times are the robot's (simulated time in simulation). Given a wall ``clock``, the waits for a
+detection (an input's silence, a rest's first detection) must also have lasted that long on the
+wall clock: a simulator faster than real time outruns a detector that runs at its own wall-clock
+pace, and its frames would otherwise look unanswered.
 """
 from collections import deque
 from dataclasses import dataclass, field
@@ -104,12 +109,13 @@ class RunnerConfig:
 class SessionRunner:
     """Drives one session; ``actions`` lists what the node must do, ``rests`` what was measured."""
 
-    def __init__(self, poses, config=RunnerConfig(), replan=None, replan_after=6):
+    def __init__(self, poses, config=RunnerConfig(), replan=None, replan_after=6, clock=None):
         """
         Prepare a session over ``poses``, visited in order.
 
         replan(rests, n): n poses (n, 3) to visit instead of the n still planned, or None to keep
-        them; called once, when ``replan_after`` rests are measured.
+        them; called once, when ``replan_after`` rests are measured. clock(): wall seconds
+        (monotonic), or None to wait on the robot's times alone (see the module).
         """
         self.poses = np.asarray(poses, dtype=float)
         self.config = config
@@ -119,6 +125,9 @@ class SessionRunner:
         self.rests, self.skipped = [], []
         self.failure = None               # why the session stopped early, if it did
         self.last_input = {}              # input name -> time of its last message
+        self.clock = clock
+        self._wall_input = {}             # input name -> wall time of its last message
+        self._wall_state = None
         self.actions = []
         self._t_state = None
         self._window = SlidingRange(config.still_time)   # the last still_time while moving
@@ -132,8 +141,16 @@ class SessionRunner:
             return 1.0
         return min(max(self.index, 0), len(self.poses)) / len(self.poses)
 
+    def _wall(self):
+        return None if self.clock is None else self.clock()
+
+    def _elapsed(self, t, since, wall_since):
+        """Return the seconds since (``since``, ``wall_since``) on both clocks (session_limits)."""
+        wall = self._wall()
+        return session_limits.silence(t - since, None if wall is None else wall - wall_since)
+
     def _enter(self, state, t):
-        self.state, self._t_state = state, t
+        self.state, self._t_state, self._wall_state = state, t, self._wall()
 
     def _next_pose(self, t):
         self.index += 1
@@ -149,11 +166,12 @@ class SessionRunner:
     def start(self, t):
         """Start the session at time t (s): command the first pose."""
         self.last_input = dict.fromkeys(INPUTS, t)
+        self._wall_input = dict.fromkeys(INPUTS, self._wall())
         self._next_pose(t)
 
     def joint_state(self, t, Theta):
         """Take one /joint_states sample: the increments (rad) of the three joints."""
-        self.last_input['joint_states'] = t
+        self._heard('joint_states', t)
         if self.state == MOVING:
             self._window.add(t, [float(v) for v in Theta])
             # Ignore stillness right after the goal: the robot has not started moving yet.
@@ -166,10 +184,13 @@ class SessionRunner:
 
     def detection(self, t, position, covariance):
         """Take one sphere detection, in the optical frame (m), with its covariance (3x3, m^2)."""
-        self.last_input['sphere/detection'] = t
+        self._heard('sphere/detection', t)
         if self.state == MEASURING and np.all(np.isfinite(position)):
             self._rest.sphere.append(np.asarray(position, dtype=float))
             self._rest.sphere_cov.append(np.asarray(covariance, dtype=float).reshape(3, 3))
+
+    def _heard(self, name, t):
+        self.last_input[name], self._wall_input[name] = t, self._wall()
 
     def tick(self, t):
         """Advance on time alone: settle time over, time-outs, enough frames, silent inputs."""
@@ -188,7 +209,8 @@ class SessionRunner:
         elif self.state == MEASURING:
             if len(self._rest.sphere) >= c.frames_per_pose:
                 self._finish_rest(t)
-            elif not self._rest.sphere and t - self._t_state > c.no_ball_time:
+            elif (not self._rest.sphere
+                  and self._elapsed(t, self._t_state, self._wall_state) > c.no_ball_time):
                 self.skipped.append((self.index, f'no detection in {c.no_ball_time:.1f} s'
                                                  ' (ball not in view?)'))
                 self.actions.append(('rest_end', self.index))
@@ -204,12 +226,15 @@ class SessionRunner:
     def _stop_if_silent(self, t):
         """Stop the session, saying why, if an input is silent for longer than a pose can last."""
         limit = session_limits.pose_time_limit(self.config)
-        silent = session_limits.silent_inputs(self.last_input, t, limit)
+        silences = {name: self._elapsed(t, self.last_input[name], self._wall_input[name])
+                    for name in INPUTS}
+        silent = session_limits.silent_inputs(silences, limit)
         if not silent:
             return False
         self.failure = '; '.join(
-            f'no message on {name} for {t - self.last_input[name]:.1f} s, longer than a pose '
-            f'can last ({limit:.1f} s): {INPUTS[name]}' for name in silent)
+            f'no message on {name} for {silences[name]:.1f} s ({t - self.last_input[name]:.1f} s '
+            f'of robot time), longer than a pose can last ({limit:.1f} s): {INPUTS[name]}'
+            for name in silent)
         if self.state == MEASURING:
             self.actions.append(('rest_end', self.index))
         self._enter(DONE, t)

@@ -23,6 +23,12 @@ def test_a_pose_lasts_at_most_its_time_outs_end_to_end():
 
 
 def test_only_inputs_silent_for_longer_than_the_limit_are_named():
-    last = {'joint_states': 9.5, 'sphere/detection': 4.0}
-    assert session_limits.silent_inputs(last, 10.0, 5.0) == ['sphere/detection']
-    assert session_limits.silent_inputs(last, 9.0, 5.0) == []
+    silences = {'joint_states': 0.5, 'sphere/detection': 6.0}
+    assert session_limits.silent_inputs(silences, 5.0) == ['sphere/detection']
+    assert session_limits.silent_inputs(silences, 6.0) == []
+
+
+def test_the_silence_is_the_shorter_of_the_robot_s_and_the_wall_s():
+    assert session_limits.silence(8.5) == 8.5
+    assert session_limits.silence(8.5, 0.3) == 0.3      # a simulator running ahead of the wall
+    assert session_limits.silence(2.0, 8.0) == 2.0      # a simulator slower than real time

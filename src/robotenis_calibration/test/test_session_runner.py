@@ -8,13 +8,13 @@ from robotenis_calibration.session_runner import (DONE, MEASURING, RunnerConfig,
 
 
 def drive(runner, visible, dt=0.001, t_end=30.0, seed=0, joints_until=math.inf,
-          detector_until=math.inf, frame_ms=8):
+          detector_until=math.inf, frame_ms=8, on_step=None):
     """
     Drive ``runner`` with a fake robot that moves to each goal in 0.3 s.
 
     Its readings are quantised with the simulator's count and noise; the camera sees the ball at
     120 Hz (a frame every ``frame_ms``) when visible. The joint states stop at ``joints_until``,
-    the detections at ``detector_until`` (s).
+    the detections at ``detector_until`` (s). ``on_step(t)`` is told each step's time.
     """
     rng = np.random.default_rng(seed)
     q = 2 * np.pi / 163840
@@ -22,6 +22,8 @@ def drive(runner, visible, dt=0.001, t_end=30.0, seed=0, joints_until=math.inf,
     Theta = start = target = np.zeros(3)
     runner.start(t)
     while runner.state != DONE and t < t_end:
+        if on_step is not None:
+            on_step(t)
         for a in runner.take_actions():
             actions.append((t, a))
             if a[0] == 'goal':
@@ -166,6 +168,53 @@ def test_a_detector_that_stops_stops_the_session_naming_it():
     assert limit < t_stop - last <= limit + 0.002 and last < 2.5
     assert 'sphere detector' in runner.failure and 'joint_states' not in runner.failure
     assert len(runner.rests) >= 1 and runner.fraction < 1.0
+
+
+class FastSimulation:
+    """A wall clock for a simulation that runs ``speed`` times faster than real time."""
+
+    def __init__(self, speed):
+        self.speed, self.t = speed, 0.0
+
+    def step(self, t):
+        self.t = t
+
+    def __call__(self):
+        return self.t / self.speed
+
+
+def test_a_simulator_ahead_of_the_wall_waits_for_a_live_detector_on_the_wall_clock():
+    """
+    At 30x real time a detector answering a frame per 40 ms of wall time answers every 1.2 s.
+
+    On the robot's clock alone each rest's first detection comes later than no_ball_time (0.5 s)
+    and its pose is skipped; on both clocks each rest is measured.
+    """
+    poses = np.array([[0.1, 0, 1.0], [0.2, 0, 1.0], [0.3, 0, 1.0]])
+    config = RunnerConfig(frames_per_pose=3, settle_time=0.1, move_timeout=2.0,
+                          measure_timeout=2.0)
+    robot_clock_only = SessionRunner(poses, config)
+    drive(robot_clock_only, lambda k: True, frame_ms=1200)
+    assert robot_clock_only.skipped and 'no detection in 0.5 s' in robot_clock_only.skipped[0][1]
+    wall = FastSimulation(30.0)
+    runner = SessionRunner(poses, config, clock=wall)
+    drive(runner, lambda k: True, frame_ms=1200, on_step=wall.step)
+    assert runner.failure is None and not runner.skipped
+    assert [len(r.sphere) for r in runner.rests] == [3, 3, 3]
+
+
+def test_a_dead_detector_in_a_fast_simulation_stops_the_session_on_the_wall_clock():
+    """At 5x real time, detections stop at 2.5 s: the stop comes a pose limit of wall time on."""
+    config = RunnerConfig(frames_per_pose=10, settle_time=0.1, move_timeout=2.0,
+                          measure_timeout=2.0)
+    wall = FastSimulation(5.0)
+    runner = SessionRunner(np.array([[0.1 * k, 0, 1.0] for k in range(1, 40)]), config,
+                           clock=wall)
+    actions = drive(runner, lambda k: True, detector_until=2.5, on_step=wall.step)
+    limit = session_limits.pose_time_limit(config)
+    assert runner.state == DONE and 'sphere detector' in runner.failure
+    last = runner.last_input['sphere/detection']
+    assert limit < (actions[-1][0] - last) / wall.speed <= limit + 0.002
 
 
 def test_joint_states_that_stop_stop_the_session_naming_them():
