@@ -375,20 +375,9 @@ class SingleRobotDynamics:
                            + k2 * (t2y * dd2 - q2 * r2y)))
         hz = (M_PP * az + (0 + k0 * (t0z * dd0 - q0 * r0z) + k1 * (t1z * dd1 - q1 * r1z)
                            + k2 * (t2z * dd2 - q2 * r2z))) - self.g_platform
-        # lambda = (A^T)^-1 rhs, A^T with columns 2 d_i: its inverse by cofactors, as _inverse3
-        m00, m01, m02 = 2 * d0x, 2 * d1x, 2 * d2x
-        m10, m11, m12 = 2 * d0y, 2 * d1y, 2 * d2y
-        m20, m21, m22 = 2 * d0z, 2 * d1z, 2 * d2z
-        c00, c01, c02 = m11 * m22 - m12 * m21, m12 * m20 - m10 * m22, m10 * m21 - m11 * m20
-        c10, c11, c12 = m21 * m02 - m22 * m01, m22 * m00 - m20 * m02, m20 * m01 - m21 * m00
-        c20, c21, c22 = m01 * m12 - m02 * m11, m02 * m10 - m00 * m12, m00 * m11 - m01 * m10
-        det = m00 * c00 + m01 * c01 + m02 * c02
-        if det == 0.0:
-            raise ZeroDivisionError('singular 3x3 matrix (parallel singularity: the forearms are '
-                                    'coplanar)')
-        lam0 = c00 / det * hx + c10 / det * hy + c20 / det * hz
-        lam1 = c01 / det * hx + c11 / det * hy + c21 / det * hz
-        lam2 = c02 / det * hx + c12 / det * hy + c22 / det * hz
+        # lambda = (A^T)^-1 rhs, A^T with columns 2 d_i
+        lam0, lam1, lam2 = _solve3(2 * d0x, 2 * d1x, 2 * d2x, 2 * d0y, 2 * d1y, 2 * d2y,
+                                   2 * d0z, 2 * d1z, 2 * d2z, hx, hy, hz)
         ga0, ga1, ga2 = self.g_arm
         Maa0, Maa1, Maa2 = self.M_aa
         tau = [Maa0 * dd0 + k0 * (t0x * ax + t0y * ay + t0z * az) - ga0 * cos(al0) - b0 * lam0,
@@ -532,18 +521,8 @@ class SingleRobotDynamics:
               - k1 * (t1x * cx + t1y * cy + t1z * cz) - M_PP * (j1x * cx + j1y * cy + j1z * cz))
         h2 = (tau2 + ga2 * ca2 - (j2x * hx + j2y * hy + j2z * hz)
               - k2 * (t2x * cx + t2y * cy + t2z * cz) - M_PP * (j2x * cx + j2y * cy + j2z * cz))
-        # solve by cofactors: c0 = m1 x m2, c1 = m2 x m0, c2 = m0 x m1 (rows)
-        c00, c01, c02 = m11 * m22 - m12 * m21, m12 * m20 - m10 * m22, m10 * m21 - m11 * m20
-        c10, c11, c12 = m21 * m02 - m22 * m01, m22 * m00 - m20 * m02, m20 * m01 - m21 * m00
-        c20, c21, c22 = m01 * m12 - m02 * m11, m02 * m10 - m00 * m12, m00 * m11 - m01 * m10
-        det = m00 * c00 + m01 * c01 + m02 * c02
-        if det == 0.0:
-            raise ZeroDivisionError('singular 3x3 matrix (parallel singularity: the forearms are '
-                                    'coplanar)')
-        dd0 = c00 / det * h0 + c10 / det * h1 + c20 / det * h2
-        dd1 = c01 / det * h0 + c11 / det * h1 + c21 / det * h2
-        dd2 = c02 / det * h0 + c12 / det * h1 + c22 / det * h2
-        return [dd0, dd1, dd2], [px, py, pz], [vx, vy, vz]
+        dd = _solve3(m00, m01, m02, m10, m11, m12, m20, m21, m22, h0, h1, h2)
+        return list(dd), [px, py, pz], [vx, vy, vz]
 
 
 def _dot(u, v):
@@ -554,11 +533,20 @@ def _cross(u, v):
     return [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
 
 
-def _inverse3(m):
-    """Return the inverse of a 3x3 matrix (list of rows) by cofactors."""
-    c0, c1, c2 = _cross(m[1], m[2]), _cross(m[2], m[0]), _cross(m[0], m[1])
-    det = _dot(m[0], c0)
+def _solve3(m00, m01, m02, m10, m11, m12, m20, m21, m22, h0, h1, h2):
+    """
+    Return x (3 floats) with M x = h, M given row by row, by cofactors.
+
+    The cofactor rows are c0 = m1 x m2, c1 = m2 x m0, c2 = m0 x m1 and x_j = sum_i c_ij h_i / det:
+    plain floats, as the 1 kHz step needs (numpy's solve costs more than the whole step).
+    """
+    c00, c01, c02 = m11 * m22 - m12 * m21, m12 * m20 - m10 * m22, m10 * m21 - m11 * m20
+    c10, c11, c12 = m21 * m02 - m22 * m01, m22 * m00 - m20 * m02, m20 * m01 - m21 * m00
+    c20, c21, c22 = m01 * m12 - m02 * m11, m02 * m10 - m00 * m12, m00 * m11 - m01 * m10
+    det = m00 * c00 + m01 * c01 + m02 * c02
     if det == 0.0:
         raise ZeroDivisionError('singular 3x3 matrix (parallel singularity: the forearms are '
                                 'coplanar)')
-    return [[c0[j] / det, c1[j] / det, c2[j] / det] for j in range(3)]
+    return (c00 / det * h0 + c10 / det * h1 + c20 / det * h2,
+            c01 / det * h0 + c11 / det * h1 + c21 / det * h2,
+            c02 / det * h0 + c12 / det * h1 + c22 / det * h2)
