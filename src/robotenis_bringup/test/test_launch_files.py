@@ -100,6 +100,8 @@ def test_sim_time_puts_the_simulator_and_the_visual_loop_in_lockstep():
     assert calibration['sim_motors']['visual_answer'] == 'detection'
     assert calibration['sim_motors']['visual_rest_speed'] > 0
     assert nodes['sim_motors']['visual_answer'] == 'command'
+    # the tracked ball stands still in the image: no slow fit at rest inside the 1/120 s loop
+    assert nodes['sphere_detector']['rest_method'] == 'conic'
     real = launch_file.load(launch_file.find('calibration.launch.yaml'), {'sim': 'false'})
     assert {n.name for n in real} == {'sphere_detector', 'motion_controller', 'calibration'}
 

@@ -274,7 +274,8 @@ def profile_edges(image_f32, points, normals, kappa, half_width, sigma, warp=Non
     e = np.zeros(len(points))
     for it in range(iterations):
         P = profiles.at(e)
-        if refit_blur and it == iterations - 1:
+        # no profile inside the image (a ball at the border): the guess stands
+        if refit_blur and it == iterations - 1 and np.any(profiles.inside):
             sigma = estimate_blur(P[profiles.inside], s)
             design = _cached_design(float(s[0]), len(s), sigma)
         e += np.clip(design.step(P)[0], -1.0, 1.0)
@@ -315,8 +316,10 @@ def estimate_blur(P, s, sigmas=SIGMAS):
 
     One linearised edge step is taken for each candidate sigma (all candidates in one batch of
     matrix products, on every other profile: plenty for one number); the minimum of the summed
-    squared residual is refined by a parabola in log(sigma).
+    squared residual is refined by a parabola in log(sigma). Raise ValueError without profiles.
     """
+    if len(P) == 0:
+        raise ValueError('estimate_blur: no profile to estimate the blur from')
     A, Pj, D = _blur_designs(float(s[0]), len(s), tuple(sigmas))
     P = P[::2]
     theta = np.matmul(P, A)                         # (S, n, 4)

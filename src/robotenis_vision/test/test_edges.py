@@ -1,4 +1,6 @@
 """The limb profile model on straight edges with known position, blur and shading."""
+import warnings
+
 import cv2
 import numpy as np
 import pytest
@@ -58,6 +60,19 @@ def test_blur_is_estimated():
     sigma = edges.estimate_blur(P[inside], s)
     expected = np.sqrt(1.2 ** 2 + 1 / 12)
     assert abs(sigma - expected) < 0.1 * expected
+
+
+def test_profiles_outside_the_image_keep_the_blur_guess():
+    """A predicted outline wholly off the image: nothing measured, no blur made up, no warning."""
+    image = edge_image(20.0, 1.0, CASES[0][0], CASES[0][1])
+    points = np.column_stack([np.full(4, -30.0), np.arange(18.0, 22.0)])
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        fit, sigma = edges.profile_edges(image, points, np.tile([1.0, 0.0], (4, 1)), np.zeros(4),
+                                         4.0, 1.3, refit_blur=True)
+    assert sigma == 1.3 and not np.any(fit.ok)
+    with pytest.raises(ValueError, match='no profile'):
+        edges.estimate_blur(np.empty((0, 33)), np.arange(33.0))
 
 
 def test_curvature_correction_moves_the_edge_outward():
