@@ -338,12 +338,9 @@ class SingleRobotDynamics:
         d1x, d1y, d1z = px - rad * cp1, py - rad * sp1, pz - a1 * sa1
         rad = R2 + a2 * ca2
         d2x, d2y, d2z = px - rad * cp2, py - rad * sp2, pz - a2 * sa2
-        r0x, r0y, r0z = ca0 * cp0, ca0 * sp0, sa0
-        r1x, r1y, r1z = ca1 * cp1, ca1 * sp1, sa1
-        r2x, r2y, r2z = ca2 * cp2, ca2 * sp2, sa2
-        t0x, t0y, t0z = -sa0 * cp0, -sa0 * sp0, ca0
-        t1x, t1y, t1z = -sa1 * cp1, -sa1 * sp1, ca1
-        t2x, t2y, t2z = -sa2 * cp2, -sa2 * sp2, ca2
+        r0x, r0y, r0z, t0x, t0y, t0z = _arm_axes(ca0, sa0, cp0, sp0)
+        r1x, r1y, r1z, t1x, t1y, t1z = _arm_axes(ca1, sa1, cp1, sp1)
+        r2x, r2y, r2z, t2x, t2y, t2z = _arm_axes(ca2, sa2, cp2, sp2)
         b0 = -2 * a0 * (d0x * t0x + d0y * t0y + d0z * t0z)
         b1 = -2 * a1 * (d1x * t1x + d1y * t1y + d1z * t1z)
         b2 = -2 * a2 * (d2x * t2x + d2y * t2y + d2z * t2z)
@@ -414,12 +411,9 @@ class SingleRobotDynamics:
         q1x, q1y, q1z = rad * cp1, rad * sp1, a1 * sa1
         rad = R2 + a2 * ca2
         q2x, q2y, q2z = rad * cp2, rad * sp2, a2 * sa2
-        r0x, r0y, r0z = ca0 * cp0, ca0 * sp0, sa0
-        r1x, r1y, r1z = ca1 * cp1, ca1 * sp1, sa1
-        r2x, r2y, r2z = ca2 * cp2, ca2 * sp2, sa2
-        t0x, t0y, t0z = -sa0 * cp0, -sa0 * sp0, ca0
-        t1x, t1y, t1z = -sa1 * cp1, -sa1 * sp1, ca1
-        t2x, t2y, t2z = -sa2 * cp2, -sa2 * sp2, ca2
+        r0x, r0y, r0z, t0x, t0y, t0z = _arm_axes(ca0, sa0, cp0, sp0)
+        r1x, r1y, r1z, t1x, t1y, t1z = _arm_axes(ca1, sa1, cp1, sp1)
+        r2x, r2y, r2z, t2x, t2y, t2z = _arm_axes(ca2, sa2, cp2, sp2)
         # trilateration (forward_kinematics)
         ux, uy, uz = q1x - q0x, q1y - q0y, q1z - q0z
         vx, vy, vz = q2x - q0x, q2y - q0y, q2z - q0z
@@ -531,6 +525,16 @@ def _dot(u, v):
 
 def _cross(u, v):
     return [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+
+
+def _arm_axes(ca, sa, cp, sp):
+    """
+    Return r_i and t_i of one leg, as six floats.
+
+    r_i is the unit vector along arm i at angle alpha (cos, sin: ca, sa) in the leg's plane at
+    azimuth phi (cp, sp); t_i = d r_i / d alpha, its tangent.
+    """
+    return ca * cp, ca * sp, sa, -sa * cp, -sa * sp, ca
 
 
 def _solve3(m00, m01, m02, m10, m11, m12, m20, m21, m22, h0, h1, h2):
