@@ -31,6 +31,8 @@ def _roi_contour(img_f32, centre, r):
     half = int(np.ceil(2.0 * r)) + 4
     u0, v0 = max(int(centre[0]) - half, 0), max(int(centre[1]) - half, 0)
     u1, v1 = min(int(centre[0]) + half + 1, w), min(int(centre[1]) + half + 1, h)
+    if u1 - u0 < half or v1 - v0 < half:
+        raise DetectionError('baseline: the ball is not in the image')
     roi = cv2.GaussianBlur(np.ascontiguousarray(img_f32[v0:v1, u0:u1]), (0, 0), 1.0)
     vv, uu = np.mgrid[v0:v1, u0:u1]
     dist = np.hypot(uu - centre[0], vv - centre[1]) / r

@@ -125,6 +125,10 @@ def test_paper_method_on_axis_is_exact_and_baseline_runs():
     assert abs(along) < tol_along and across < tol_across and paper.method == 'paper'
     base = detector.detect(image, CAM, R, 'baseline')
     assert base.method == 'baseline' and abs(base.position[2] - c[2]) < 0.1 * c[2]
+    # a search candidate whose centre lies off the image is refused, not a crash of OpenCV
+    with pytest.raises(DetectionError, match='not in the image'):
+        detector.measure(image.astype(np.float32), CAM, R, 'baseline',
+                         np.array([0.15, 0.075, 0.17]), detector.BLUR_GUESS)
 
 
 def test_what_cannot_be_measured_is_refused_with_a_reason():
