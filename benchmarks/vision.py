@@ -224,8 +224,10 @@ def figures(t):
             lat_b.append(max(np.sum(across.mean(axis=0) ** 2)
                              - np.sum(across.var(axis=0, ddof=1)) / n, 0.0) / d ** 2)
             sd = along.std(ddof=1)
-            bound = np.nanmean([f[2] for f in frames])
-            prec.append(sd / bound if bound > 0 else np.nan)
+            # only the model fit states its Fisher bound
+            bounds = [f[2] for f in frames if np.isfinite(f[2])]
+            if bounds:
+                prec.append(sd / np.mean(bounds))
             own.append(sd / pred_along)
             dev = E - E.mean(axis=0)
             nees += float(np.einsum('ni,ij,nj->', dev, np.linalg.pinv(P), dev))
@@ -238,7 +240,7 @@ def figures(t):
     band = chi2.ppf([0.005, 0.995], dof) if dof else (np.nan, np.nan)
     return {'depth_bias': 100 * np.sqrt(np.mean(depth_b)) if depth_b else np.nan,
             'lateral_bias': 100 * np.sqrt(np.mean(lat_b)) if lat_b else np.nan,
-            'precision': np.nanmedian(prec) if prec else np.nan,
+            'precision': np.median(prec) if prec else np.nan,
             'own': np.nanmedian(own) if own else np.nan,
             'nees': nees if dof else np.nan, 'nees_band': band,
             'median': float(np.median(err3)), 'rms': float(np.sqrt(np.mean(err3 ** 2))),
