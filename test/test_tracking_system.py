@@ -53,6 +53,8 @@ def runs():
         live.acquire()
         on = live.measure(TRACKING_S, 'tracking')
         live.set_tracker(enabled=False)
+        assert live.probe.commands, (f'the tracker sent no command in {TRACKING_S} s of tracking '
+                                     f'({100 * on.detected:.1f} % of the frames detected)')
         live.spin_until(lambda: live.probe.now >= live.probe.commands[-1][0] + STOP_S, 'stopping')
         off = live.measure(OFF_S, 'tracker off')
         effector = np.array([P for ns, P in sorted(live.probe.effector.items())

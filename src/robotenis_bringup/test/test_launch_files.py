@@ -102,6 +102,7 @@ def test_sim_time_puts_the_simulator_and_the_visual_loop_in_lockstep():
     assert nodes['sim_motors']['visual_answer'] == 'command'
     # the tracked ball stands still in the image: no slow fit at rest inside the 1/120 s loop
     assert nodes['sphere_detector']['rest_method'] == 'conic'
+    assert nodes['sphere_detector']['search_interval'] == 0.0  # a lost ball searched every frame
     assert nodes['sim_motors']['visual_timeout'] >= 1.0    # a stall of 0.14 s kept the loop
     real = launch_file.load(launch_file.find('calibration.launch.yaml'), {'sim': 'false'})
     assert {n.name for n in real} == {'sphere_detector', 'motion_controller', 'calibration'}
@@ -109,6 +110,7 @@ def test_sim_time_puts_the_simulator_and_the_visual_loop_in_lockstep():
 
 @pytest.mark.parametrize('argument, package, executable, parameter', [
     ('rest_method', 'robotenis_vision', 'sphere_detector', 'rest_method'),
+    ('search_interval', 'robotenis_vision', 'sphere_detector', 'search_interval'),
     ('visual_answer', 'robotenis_sim', 'sim_motors', 'visual_answer'),
     ('visual_delay', 'robotenis_sim', 'sim_motors', 'visual_delay'),
     ('visual_timeout', 'robotenis_sim', 'sim_motors', 'visual_timeout'),
