@@ -31,7 +31,11 @@ minor semi-axis) measured in the same run:
    misses the ball (a pattern's or a shadow's round outline measured instead) is a failure too,
    counted apart ("wrong ball") and kept out of the other figures;
 6. speed on one core, 640x480: a stream of frames (each seeded by the last; target < 2 ms) and a
-   single image (< 5 ms), and the render time of the project's renderer (< 4 ms).
+   single image (< 5 ms), and the render time of the project's renderer (< 4 ms);
+7. at rest, as the sphere_detector node measures (robotenis_vision.rest.RestCorrection: the conic
+   on every frame, the model fit on mean images at powers of two) against the node before it (the
+   model fit seeded on every frame at rest): the model fits' CPU per rest, and the error of the
+   mean of a rest's last frames, the part the calibration averages.
 """
 import os
 
@@ -48,6 +52,7 @@ import mitsuba_scenes as ms  # noqa: E402
 import numpy as np  # noqa: E402
 from robotenis_sim import camera_model as cm  # noqa: E402
 from robotenis_vision import camera, detector  # noqa: E402
+from robotenis_vision.rest import RestCorrection  # noqa: E402
 from scipy.stats import chi2  # noqa: E402
 
 cv2.setNumThreads(1)
@@ -430,6 +435,79 @@ def speed_verdicts(rows):
           f'{TARGET_SINGLE_MS:.0f}: {verdict(worst < TARGET_SINGLE_MS)})')
 
 
+def at_rest(scenes, n_scenes=8, rests=2, settle=36, averaged=30, far=0.45):
+    """
+    Compare the node's rest step with a model fit on every frame, on rests of the scene list.
+
+    The first ``n_scenes`` scenes within ``far`` m, ``rests`` rests each of ``settle`` +
+    ``averaged`` frames with fresh noise (the demo's 0.3 s settle and 30 frames at 120 Hz).
+    """
+    print(f'5. at rest, as the node measures: {rests} rests of {settle + averaged} frames per '
+          f"scene, the last {averaged} averaged; the model fits' CPU per rest (ms) and the "
+          "average's error (mm, along the line of sight and across it)")
+    print('   scene  range | a fit per frame: CPU  along  across | on mean images: fits  CPU  '
+          'along  across')
+    rng = np.random.default_rng(9)
+    rows = []
+    near = [s for s in scenes if np.linalg.norm(s['ball']['center_m']) <= far][:n_scenes]
+    for k, s in enumerate(near):
+        c, kw = project_scene(s)
+        for _ in range(rests):
+            row = rest_pair(c, kw, rng, settle + averaged, averaged)
+            if row is None:
+                print(f'   {k:5d}  {np.linalg.norm(c):.3f} | a frame refused: rest left out')
+                continue
+            rows.append(row)
+            print(f'   {k:5d}  {np.linalg.norm(c):.3f} | {row[0] * 1e3:19.0f} {row[1]:+6.3f} '
+                  f'{row[2]:7.3f} | {row[6]:19d} {row[3] * 1e3:4.0f} {row[4]:+6.3f} {row[5]:7.3f}')
+    a = np.array(rows)
+    rms = np.sqrt(np.mean(a[:, [1, 4]] ** 2, axis=0))
+    print(f'   {len(a)} rests: model fits {np.median(a[:, 0]) * 1e3:.0f} ms CPU a rest (median) '
+          f'on every frame, {np.median(a[:, 3]) * 1e3:.0f} ms on mean images '
+          f'({np.median(a[:, 0] / a[:, 3]):.1f}x less); depth error RMS {rms[0]:.3f} and '
+          f'{rms[1]:.3f} mm; the two averages {np.sqrt(np.mean((a[:, 4] - a[:, 1]) ** 2)):.3f} mm '
+          'RMS apart in depth')
+
+
+def rest_pair(c, kw, rng, frames, averaged):
+    """
+    Measure one rest both ways; None if the conic refuses a frame.
+
+    RestCorrection with the model fit on every frame at rest, and on mean images. Returns, for
+    each way, the model fits' CPU (s) and the depth and lateral error (mm) of the last
+    ``averaged`` frames' mean; and the number of fits on mean images.
+    """
+    gamma, cpu, fits = kw['gamma'], [0.0, 0.0], [0, 0]
+
+    def accurate(way):
+        def fit(image, seed):
+            t = time.process_time()
+            try:
+                return detector.detect(image, CAM, R, 'model', seed, gamma)
+            finally:
+                fits[way] += 1
+                cpu[way] += time.process_time() - t
+        return fit
+
+    ways = [RestCorrection(0.3, 3, accurate(k), 'model', every_frame=k == 0) for k in (0, 1)]
+    prior, measured = None, ([], [])
+    for _ in range(frames):
+        image = cm.render(CAM, c, R, rng, **kw)
+        fast = attempt(image, CAM, 'conic', gamma, prior)
+        if isinstance(fast, str):
+            return None
+        prior = fast
+        for way, P in zip(ways, measured):
+            det, _ = way.update(image, fast, CAM.project(fast.position))
+            if det is not fast:         # at rest: the accurate method's
+                P.append(det.position)
+    errors = []
+    for P in measured:
+        along, across = split(np.mean(P[-averaged:], axis=0) - c, c)
+        errors += [float(along) * 1e3, float(np.linalg.norm(across)) * 1e3]
+    return cpu[0], errors[0], errors[1], cpu[1], errors[2], errors[3], fits[1]
+
+
 def main():
     at_200mm()
     scenes = None
@@ -447,6 +525,7 @@ def main():
     rows = speed(scenes)
     speed_verdicts(rows)
     render_speed()
+    at_rest(scenes)
     return 0
 
 

@@ -12,18 +12,23 @@ gives
 
 f_k its fast detection, a(M_j) the accurate method on the mean image M_j of the j frames summed
 at the last fit, mean(f_1 .. f_j) their fast detections' mean: the accurate method's position of
-the ball at rest, with the frame's own noise and any slow drift from the fast one. Averaged over
-a rest, p_k carries the accurate fit's bias on an image of noise sigma / sqrt(j), which tends to
-its bias on a noise-free render (the bias robotenis_validation.study gives the studies), where a
-mean of per-frame fits carried their bias on single noisy frames, which depends on the sensor's
-noise (0.06-0.14 mm apart in depth at 0.25-0.4 m, the simulated camera). The fast detections'
-mean, not the fast method on M_j, is subtracted: the fast method's own noise-dependent bias
-cancels in f_k - mean(f). A mean image is only of one ball position: if the fast detection
-leaves the summed frames' mean by more than ``motion_px``, the sum starts again from that frame.
-With a camera response gamma != 1 the mean of encoded grey levels is fitted, a second-order error
-of (noise / level)^2, negligible at the noise of a camera.
+the ball at rest, with the frame's own noise and any slow drift from the fast one. The fast
+detections' mean, not the fast method on M_j, is subtracted: the fast method's own
+noise-dependent bias cancels in f_k - mean(f) (the conic on M_j was up to 0.06 mm off in depth at
+0.38 m). Averaged over a rest, p_k has the mean and about the spread of a mean of per-frame fits
+(measured on four balls at 0.25-0.40 m: benchmarks/vision.py, "at rest") for a tenth of the fits:
+each fit starts from the last, so the noise levels of the first, one-frame fit weight them all. (A
+fit of a mean image from a cold start is weighted by its own, lower, noise and lands near the fit
+of a noise-free render, from which the per-frame fits' mean was 0.06-0.14 mm farther in depth at
+those poses.) RestCorrection is the sphere_detector node's step per frame. A mean image is only of
+one ball position: if the fast detection leaves the summed frames' mean by more than ``motion_px``,
+the sum starts again from that frame. With a camera response gamma != 1 the mean of encoded grey
+levels is fitted, a second-order error of (noise / level)^2, negligible at the noise of a camera.
 """
+from dataclasses import replace
+
 import numpy as np
+from robotenis_vision.detection import DetectionError
 
 
 class RestSwitch:
@@ -103,3 +108,58 @@ class MeanCorrection:
     def corrected(self, fast_position):
         """Return the fast position plus the latest correction, or None before the first fit."""
         return None if self.delta is None else np.asarray(fast_position, dtype=float) + self.delta
+
+
+class RestCorrection:
+    """
+    One frame's step at rest, as the sphere_detector node takes it: RestSwitch and MeanCorrection.
+
+    ``accurate(image, seed)`` runs the accurate method on an image from a seed Detection and
+    returns its Detection or raises DetectionError; ``label`` names it in the corrected
+    detections' method ('conic+model mean'). ``every_frame``: the accurate method on every frame
+    at rest instead (its own detection published), as the node measured before MeanCorrection:
+    log2(n) + 1 fits become n.
+    """
+
+    def __init__(self, motion_px, frames, accurate, label, every_frame=False):
+        self.switch = RestSwitch(motion_px, frames)
+        self.mean = MeanCorrection(motion_px)
+        self.accurate, self.label, self.every_frame = accurate, label, every_frame
+        self.last = None                # the accurate method's last Detection
+
+    def lost(self):
+        """Record a frame without a detection."""
+        self.switch.lost()
+        self.mean.reset()
+        self.last = None
+
+    def update(self, image, det, px):
+        """
+        Return the Detection to publish for a frame and its fast Detection det (px: its centre).
+
+        And the accurate method's failure on this frame (a message) or None. The accurate method
+        starts from its own last detection while the ball stays still, else from det; if it fails
+        the last correction stays, and before any, det is returned.
+        """
+        if not self.switch.update(px):
+            self.mean.reset()
+            self.last = None
+            return det, None
+        if self.every_frame:
+            try:
+                self.last = self.accurate(image, self.last or det)
+                return self.last, None
+            except DetectionError as e:
+                self.last = None
+                return det, f'at rest: {e}'
+        failure = None
+        if self.mean.add(image, det.position, px):
+            try:
+                self.last = self.accurate(self.mean.mean_image(), self.last or det)
+                self.mean.fitted(self.last.position)
+            except DetectionError as e:
+                self.last, failure = None, f'on the mean of {self.mean.n} frames at rest: {e}'
+        position = self.mean.corrected(det.position)
+        if position is None:
+            return det, failure
+        return replace(det, position=position, method=f'{det.method}+{self.label} mean'), failure

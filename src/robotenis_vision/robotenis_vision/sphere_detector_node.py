@@ -8,7 +8,7 @@ method). With ``frames`` > 1 it publishes the average of every ``frames`` detect
 rejected, robotenis_vision.averaging), stamped with the last image. A frame it cannot trust is
 dropped with the reason in a rate-limited log line (two balls in view among them: ambiguous).
 
-Two methods (robotenis_vision.rest): ``method`` (default 'conic', seeded by the last frames: about
+Two methods (robotenis_vision.rest): ``method`` (default 'conic', seeded by the last frame: about
 1.5 ms a frame; a search of the whole image when the seed is lost, and while the ball stays lost
 once every ``search_interval`` of image time) on every frame, and once the
 ball has stood still in the image (its centre moved less than ``rest_motion_px`` for
@@ -18,7 +18,6 @@ reaches a power of two, and every frame's fast detection is published corrected 
 'conic+model mean'); while the ball moves the fast one is (figures: ``./robotenis bench
 vision``). Parameters: the table PARAMETERS.
 """
-from dataclasses import replace
 import sys
 
 from geometry_msgs.msg import PointStamped
@@ -30,8 +29,7 @@ from robotenis_kinematics import description
 from robotenis_ros.convert import image_array, point_stamped, stamp_seconds
 from robotenis_ros.node import declare_parameters, spin
 from robotenis_vision import averaging, camera as camera_model, detector
-from robotenis_vision.rest import MeanCorrection, RestSwitch
-from robotenis_vision.seed import Seed
+from robotenis_vision.rest import RestCorrection
 from sensor_msgs.msg import CameraInfo, Image
 
 PARAMETERS = {
@@ -40,14 +38,16 @@ PARAMETERS = {
                              "from the frames' mean image (one of the methods, or '' for never)"),
     'rest_motion_px': (0.3, 'px: the ball stands still when its centre moves less between frames'),
     'rest_frames': (3, 'frames it must stand still for rest_method'),
+    'rest_every_frame': (False, 'rest_method on every frame at rest instead of on mean images '
+                                '(10x the CPU; its bias differs on scenes it misfits: bench '
+                                'vision)'),
     'gamma': (1.0, "the camera's response, grey = 255 (I / 255)^(1 / gamma) (1: linear)"),
     'radius': (0.0, 'm: the sphere radius (0: from the robot description)'),
     'description_path': (description.config_path('nominal.yaml'), 'the robot description YAML'),
     'frames': (1, 'detections averaged per published measurement'),
     'max_fit_rms_px': (0.5, 'px: an outline fit worse than this (RMS) makes the frame untrusted'),
-    'use_prior': (True, "the previous frames' detections seed the next one, moved on at the "
-                        "ball's velocity (about half the time at rest); the whole image is "
-                        'searched when it does not fit'),
+    'use_prior': (True, "the previous frame's detection seeds the next one (about half the time "
+                        'at rest); the whole image is searched when it does not fit'),
     'search_interval': (0.2, 's of image time: once the ball is lost, the whole image is searched '
                              'again after this long, the frames between left unmeasured (a '
                              'search that finds nothing took 85-120 ms here in a live session: on '
@@ -78,17 +78,19 @@ class SphereDetectorNode(Node):
         if self.rest_method not in detector.METHODS + ('',):
             raise ValueError(f"rest_method must be one of {', '.join(detector.METHODS)} or '', "
                              f'got {self.rest_method!r}')
-        self.rest = RestSwitch(float(p['rest_motion_px']), int(p['rest_frames']))
-        self.mean = MeanCorrection(float(p['rest_motion_px']))
-        self.last_at_rest = None        # the rest method's last detection on the mean image
         self.gamma = float(p['gamma'])
         if not self.gamma > 0:
             raise ValueError(f'gamma must be positive, got {self.gamma}')
         self.radius = float(p['radius']) or description.load(p['description_path']).sphere_radius
+        self.rest = None                # the fast method corrected at rest (rest_method)
+        if self.rest_method and self.rest_method != self.method:
+            self.rest = RestCorrection(float(p['rest_motion_px']), int(p['rest_frames']),
+                                       self.rest_fit, self.rest_method,
+                                       bool(p['rest_every_frame']))
         self.frames = max(1, int(p['frames']))
         self.max_rms = float(p['max_fit_rms_px'])
         self.use_prior = bool(p['use_prior'])
-        self.seed = Seed()
+        self.prior = None
         self.search_interval = float(p['search_interval'])
         if not self.search_interval >= 0:
             raise ValueError(f'search_interval must not be negative, got {self.search_interval}')
@@ -123,7 +125,7 @@ class SphereDetectorNode(Node):
             self.drop('no camera_info received yet')
             return
         t = stamp_seconds(msg.header.stamp)
-        prior = self.seed.at(t) if self.use_prior else None
+        prior, self.prior = self.prior, None
         if prior is None and self.next_search - self.search_interval <= t < self.next_search:
             return                      # the ball was lost (the reason logged)
         try:
@@ -132,13 +134,16 @@ class SphereDetectorNode(Node):
                                   self.gamma)
         except (ValueError, detector.DetectionError) as e:
             self.drop(str(e))
-            self.seed.lost()
-            self.rest.lost()
-            self.mean.reset()
+            if self.rest:
+                self.rest.lost()
             self.next_search = t + self.search_interval
             return
-        self.seed.update(det, t)
-        det = self.at_rest(image, det)
+        if self.use_prior and det.method != 'baseline':
+            self.prior = det
+        if self.rest:
+            det, failure = self.rest.update(image, det, self.camera.project(det.position))
+            if failure:
+                self.get_logger().info(f'{self.rest_method} {failure}', throttle_duration_sec=5.0)
         if np.isfinite(det.fit_rms_px) and det.fit_rms_px > self.max_rms:
             self.drop(f'outline fit RMS {det.fit_rms_px:.2f} px > {self.max_rms} px')
             return
@@ -153,40 +158,10 @@ class SphereDetectorNode(Node):
             self.batch = []
             self.publish(det, msg.header, avg.frames)
 
-    def at_rest(self, image, det):
-        """
-        Return the detection to publish: corrected by the rest method once the ball stands still.
-
-        Standing still: its image moved less than rest_motion_px since the last frame, for
-        rest_frames frames (robotenis_vision.rest). The rest method runs on the mean image of the
-        frames at rest when their number reaches a power of two, from its own last detection
-        while the ball stays still, else from the fast one; if it fails, the last correction
-        stays, and without one the fast detection is published.
-        """
-        px = self.camera.project(det.position)
-        if (not self.rest_method or self.rest_method == self.method
-                or not self.rest.update(px)):
-            self.mean.reset()
-            self.last_at_rest = None
-            return det
-        if self.mean.add(image, det.position, px):
-            self.refit(det)
-        position = self.mean.corrected(det.position)
-        if position is None:
-            return det
-        return replace(det, position=position, method=f'{det.method}+{self.rest_method} mean')
-
-    def refit(self, det):
-        """Run the rest method on the mean image; keep its correction."""
-        try:
-            self.last_at_rest = detector.detect(self.mean.mean_image(), self.camera, self.radius,
-                                                self.rest_method, self.last_at_rest or det,
-                                                self.gamma)
-            self.mean.fitted(self.last_at_rest.position)
-        except detector.DetectionError as e:
-            self.last_at_rest = None
-            self.get_logger().info(f'{self.rest_method} on the mean of {self.mean.n} frames at '
-                                   f'rest: {e}', throttle_duration_sec=5.0)
+    def rest_fit(self, image, seed):
+        """Run the rest method on an image from a seed (RestCorrection's accurate method)."""
+        return detector.detect(image, self.camera, self.radius, self.rest_method, seed,
+                               self.gamma)
 
     def publish(self, det, header, frames):
         header.frame_id = header.frame_id or 'camera_optical'

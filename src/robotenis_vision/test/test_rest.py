@@ -1,8 +1,10 @@
 """The switch between the fast method while the ball moves and the accurate one at rest."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from robotenis_vision import camera as vision_camera, detector
-from robotenis_vision.rest import MeanCorrection, RestSwitch
+from robotenis_vision.rest import MeanCorrection, RestCorrection, RestSwitch
 from scipy.stats import f as f_dist
 import simple_render
 
@@ -49,42 +51,91 @@ def test_the_mean_correction_fits_at_powers_of_two_and_adds_the_accurate_less_th
 
 def rest_means(C, frames, rng):
     """
-    Average a rest of noisy frames two ways.
+    Average the frames at rest of a stream of noisy frames of a still ball, two ways.
 
-    Returns the mean of per-frame model fits, the mean of the conic corrected from mean images
-    (as the node does) and the number of model fits the second took.
+    Returns the mean of per-frame model fits, the mean of the node's detections (RestCorrection:
+    the conic corrected from mean images) and the number of model fits the second took.
     """
     clean = simple_render.render(CAM, C, R).astype(np.float32)
-    per_frame, corrected, fits = [], [], 0
-    last, last_mean, prior, mean = None, None, None, MeanCorrection(0.3)
+    fits = []
+
+    def accurate(image, seed):
+        fits.append(image)
+        return detector.detect(image, CAM, R, 'model', seed)
+
+    rest = RestCorrection(0.3, 3, accurate, 'model')
+    per_frame, corrected, last, prior = [], [], None, None
     for _ in range(frames):
         image = np.clip(np.rint(clean + NOISE * rng.standard_normal(clean.shape)), 0, 255)
         image = image.astype(np.uint8)
         fast = prior = detector.detect(image, CAM, R, 'conic', prior)
-        last = detector.detect(image, CAM, R, 'model', last or fast)
-        per_frame.append(last.position)
-        if mean.add(image, fast.position, CAM.project(fast.position)):
-            last_mean = detector.detect(mean.mean_image(), CAM, R, 'model', last_mean or fast)
-            mean.fitted(last_mean.position)
-            fits += 1
-        corrected.append(mean.corrected(fast.position))
-    return np.mean(per_frame, axis=0), np.mean(corrected, axis=0), fits
+        det, failure = rest.update(image, fast, CAM.project(fast.position))
+        assert failure is None
+        if det.method == 'conic+model mean':
+            last = detector.detect(image, CAM, R, 'model', last or fast)
+            per_frame.append(last.position)
+            corrected.append(det.position)
+    return np.mean(per_frame, axis=0), np.mean(corrected, axis=0), len(fits)
 
 
 def test_a_rest_corrected_from_mean_images_agrees_with_per_frame_fits_at_a_fraction_of_the_fits():
     # rests on an independent renderer (simple_render); the two averages' difference over rests
     # must be zero within its own scatter: Hotelling's T^2 at the 1 % level
     rng = np.random.default_rng(7)
-    C, frames, rests = np.array([0.04, -0.03, 0.32]), 16, 12
+    C, frames, rests = np.array([0.04, -0.03, 0.32]), 19, 12
     D, fits = [], set()
     for _ in range(rests):
         a, b, n = rest_means(C, frames, rng)
         D.append(b - a)
         fits.add(n)
-    assert fits == {5}                                      # frames 1, 2, 4, 8, 16 of 16
+    # at rest from the fourth frame (3 still ones): fitted at 1, 2, 4, 8, 16 of 16 frames
+    assert fits == {5}
     D = np.array(D)
     m, S = D.mean(axis=0), np.cov(D.T)
     t2 = rests * m @ np.linalg.solve(S, m)
     p = 3
     limit = p * (rests - 1) / (rests - p) * f_dist.ppf(0.99, p, rests - p)
     assert t2 < limit, (t2, limit, m)
+
+
+def test_a_failed_fit_at_rest_keeps_the_last_correction_and_says_why():
+    calls = []
+
+    def accurate(image, seed):
+        calls.append(seed)
+        if len(calls) == 2:
+            raise detector.DetectionError('misfit')
+        return replace(seed, position=np.array([0.0, 0.0, 0.301]))
+
+    rest = RestCorrection(0.3, 1, accurate, 'model')
+    fast = detector.Detection(np.array([0.0, 0.0, 0.3]), np.eye(3) * 1e-10, np.zeros((0, 2)),
+                              0.1, 'conic')
+    image = np.zeros((4, 5), np.uint8)
+    out = [rest.update(image, fast, (320.0, 240.0)) for _ in range(3)]
+    assert out[0] == (fast, None)                             # not yet still
+    assert out[1][0].method == 'conic+model mean' and out[1][1] is None
+    np.testing.assert_allclose(out[1][0].position, [0.0, 0.0, 0.301])
+    # the second fit fails: the first correction stays, the reason is given; the next fit starts
+    # from the fast detection again, not from the failed one's seed
+    assert out[2][1] == 'on the mean of 2 frames at rest: misfit'
+    np.testing.assert_allclose(out[2][0].position, [0.0, 0.0, 0.301])
+    assert calls[0] is fast and calls[1].position[2] == 0.301
+    rest.update(image, fast, (320.0, 240.0))                  # 3 frames: no fit due
+    rest.update(image, fast, (320.0, 240.0))                  # 4 frames: fitted from fast
+    assert len(calls) == 3 and calls[2] is fast
+
+
+def test_every_frame_at_rest_publishes_the_accurate_method_on_the_frame_itself():
+    seen = []
+
+    def accurate(image, seed):
+        seen.append((int(image[0, 0]), seed))
+        return replace(seed, position=seed.position + 1e-4, method='model')
+
+    rest = RestCorrection(0.3, 1, accurate, 'model', every_frame=True)
+    fast = detector.Detection(np.array([0.0, 0.0, 0.3]), np.eye(3) * 1e-10, np.zeros((0, 2)),
+                              0.1, 'conic')
+    out = [rest.update(np.full((4, 5), k, np.uint8), fast, (320.0, 240.0))[0] for k in range(4)]
+    assert out[0] is fast and [m.method for m in out[1:]] == ['model'] * 3
+    # each frame's own image, seeded by the frame before's fit (the first by the fast one)
+    assert [v for v, _ in seen] == [1, 2, 3] and seen[0][1] is fast and seen[1][1] is out[1]
