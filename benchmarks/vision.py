@@ -483,13 +483,15 @@ def rest_pair(c, kw, rng, frames, averaged):
         def fit(image, seed):
             t = time.process_time()
             try:
-                return detector.detect(image, CAM, R, 'model', seed, gamma)
+                return detector.detect(image, CAM, R, 'model', seed, gamma, search=False)
             finally:
                 fits[way] += 1
                 cpu[way] += time.process_time() - t
         return fit
 
-    ways = [RestCorrection(0.3, 3, accurate(k), 'model', every_frame=k == 0) for k in (0, 1)]
+    ways = [RestCorrection(0.3, 3, accurate(k), 'model',
+                           lambda p: (*CAM.project(p), CAM.apparent_radius(p, R)),
+                           every_frame=k == 0) for k in (0, 1)]
     prior, measured = None, ([], [])
     for _ in range(frames):
         image = cm.render(CAM, c, R, rng, **kw)

@@ -65,14 +65,15 @@ def check_image(image, camera):
     return image.astype(np.float32)
 
 
-def detect(image, camera, radius, method='model', prior=None, gamma=1.0):
+def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=True):
     """
     Measure the sphere of ``radius`` (m) in ``image`` (mono, as the camera gives it): a Detection.
 
     ``prior``: the Detection of a previous frame of the same scene (a ball at rest, a slow one).
     The outline is then measured where it was (no search): about half the time. If it is not found
-    there, the search is run after all. ``gamma``: the camera's response (grey = 255 (I / 255)^(1 /
-    gamma); 1 for a linear camera), used by the model method.
+    there, the search is run after all, unless ``search`` is False: then its DetectionError is
+    raised (a refinement of that ball must not measure another). ``gamma``: the camera's response
+    (grey = 255 (I / 255)^(1 / gamma); 1 for a linear camera), used by the model method.
     """
     if method not in METHODS:
         raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
@@ -87,7 +88,10 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0):
                            prior.extra.get('psf_sigma', BLUR_GUESS), gamma,
                            prior.extra.get('noise_levels'))
         except DetectionError:
-            pass
+            if not search:
+                raise
+    elif not search:
+        raise ValueError('detect: search=False needs a prior (not with the baseline method)')
     found, failures = [], []
     for sphere in find(img, camera, radius):
         try:

@@ -163,3 +163,14 @@ def test_one_blob_found_at_two_sizes_is_one_ball():
     beside = c + [2.5 * R, 0.0, 0.0]
     assert not detector._same_ball(CAM, c, beside, R)
     assert not detector._same_ball(CAM, c, 1.3 * beside, R)
+
+
+def test_without_search_a_ball_not_where_the_prior_says_is_an_error_not_another_ball():
+    c = np.array([0.0, 0.0, 0.3])
+    image = simple_render.render(CAM, c, R)
+    prior = detector.detect(simple_render.render(CAM, c + [0.05, 0.0, 0.0], R), CAM, R, 'conic')
+    assert np.allclose(detector.detect(image, CAM, R, 'model', prior).position, c, atol=1e-3)
+    with pytest.raises(DetectionError):
+        detector.detect(image, CAM, R, 'model', prior, search=False)
+    with pytest.raises(ValueError, match='search=False needs a prior'):
+        detector.detect(image, CAM, R, 'model', search=False)

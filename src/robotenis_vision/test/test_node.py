@@ -57,9 +57,9 @@ def test_at_rest_the_model_fits_mean_images_at_powers_of_two_and_corrects_frames
     methods = []
     detect = detector.detect
 
-    def counting(image, camera, radius, method, *args):
+    def counting(image, camera, radius, method, *args, **kwargs):
         methods.append(method)
-        return detect(image, camera, radius, method, *args)
+        return detect(image, camera, radius, method, *args, **kwargs)
 
     monkeypatch.setattr(detector, 'detect', counting)
     cam, C = vision_camera.default(), np.array([0.03, -0.02, 0.3])
