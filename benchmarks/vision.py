@@ -459,7 +459,8 @@ def at_rest(scenes, n_scenes=8, rests=2, settle=36, averaged=30, far=0.45):
                 continue
             rows.append(row)
             print(f'   {k:5d}  {np.linalg.norm(c):.3f} | {row[0] * 1e3:19.0f} {row[1]:+6.3f} '
-                  f'{row[2]:7.3f} | {row[6]:19d} {row[3] * 1e3:4.0f} {row[4]:+6.3f} {row[5]:7.3f}')
+                  f'{row[2]:7.3f} | {row[6]:19d} {row[3] * 1e3:4.0f} {row[4]:+6.3f} {row[5]:7.3f}'
+                  f'  ({100 * row[7]:.0f} % / {100 * row[8]:.0f} % of the frames fitted)')
     a = np.array(rows)
     rms = np.sqrt(np.mean(a[:, [1, 4]] ** 2, axis=0))
     print(f'   {len(a)} rests: model fits {np.median(a[:, 0]) * 1e3:.0f} ms CPU a rest (median) '
@@ -475,7 +476,9 @@ def rest_pair(c, kw, rng, frames, averaged):
 
     RestCorrection with the model fit on every frame at rest, and on mean images. Returns, for
     each way, the model fits' CPU (s) and the depth and lateral error (mm) of the last
-    ``averaged`` frames' mean; and the number of fits on mean images.
+    ``averaged`` frames' mean as published (a frame whose model fit was refused keeps its conic
+    detection); the number of fits on mean images; the share of the frames at rest each way
+    corrected.
     """
     gamma, cpu, fits = kw['gamma'], [0.0, 0.0], [0, 0]
 
@@ -489,10 +492,8 @@ def rest_pair(c, kw, rng, frames, averaged):
                 cpu[way] += time.process_time() - t
         return fit
 
-    ways = [RestCorrection(0.3, 3, accurate(k), 'model',
-                           lambda p: (*CAM.project(p), CAM.apparent_radius(p, R)),
-                           every_frame=k == 0) for k in (0, 1)]
-    prior, measured = None, ([], [])
+    ways = [RestCorrection(0.3, 3, accurate(k), 'model', every_frame=k == 0) for k in (0, 1)]
+    prior, measured, corrected = None, ([], []), {True: 0, False: 0}
     for _ in range(frames):
         image = cm.render(CAM, c, R, rng, **kw)
         fast = attempt(image, CAM, 'conic', gamma, prior)
@@ -501,13 +502,15 @@ def rest_pair(c, kw, rng, frames, averaged):
         prior = fast
         for way, P in zip(ways, measured):
             det, _ = way.update(image, fast, CAM.project(fast.position))
-            if det is not fast:         # at rest: the accurate method's
+            if way.switch.still >= way.switch.frames:    # at rest: what the node publishes
                 P.append(det.position)
+                corrected[way.every_frame] += det is not fast
     errors = []
     for P in measured:
         along, across = split(np.mean(P[-averaged:], axis=0) - c, c)
         errors += [float(along) * 1e3, float(np.linalg.norm(across)) * 1e3]
-    return cpu[0], errors[0], errors[1], cpu[1], errors[2], errors[3], fits[1]
+    return (cpu[0], errors[0], errors[1], cpu[1], errors[2], errors[3], fits[1],
+            corrected[True] / len(measured[0]), corrected[False] / len(measured[1]))
 
 
 def main():

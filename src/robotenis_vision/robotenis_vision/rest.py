@@ -116,20 +116,17 @@ class RestCorrection:
 
     ``accurate(image, seed)`` runs the accurate method on an image from a seed Detection and
     returns its Detection or raises DetectionError; ``label`` names it in the corrected
-    detections' method ('conic+model mean'). ``outline(position)`` returns the ball's image
-    centre and apparent radius (u, v, r), px: a fit on a mean image whose outline lies more than
-    ``motion_px`` from the fast detections' mean is refused, since it would move every frame of
-    the rest (the two methods see one outline: they differ by about 0.1 px, a depth bias of
-    1 mm at 0.35 m; a fit that slid onto another edge differs by pixels). ``every_frame``: the
+    detections' method ('conic+model mean'). It must measure the ball it is seeded with, never
+    search for one (detector.detect(search=False)): a fit of another ball would move every frame
+    of the rest. ``every_frame``: the
     accurate method on every frame at rest instead (its own detection published), as the node
     measured before MeanCorrection: log2(n) + 1 fits become n.
     """
 
-    def __init__(self, motion_px, frames, accurate, label, outline, every_frame=False):
+    def __init__(self, motion_px, frames, accurate, label, every_frame=False):
         self.switch = RestSwitch(motion_px, frames)
         self.mean = MeanCorrection(motion_px)
         self.accurate, self.label, self.every_frame = accurate, label, every_frame
-        self.outline = outline
         self.last = None                # the accurate method's last Detection
 
     def lost(self):
@@ -161,7 +158,6 @@ class RestCorrection:
         if self.mean.add(image, det.position, px):
             try:
                 self.last = self.accurate(self.mean.mean_image(), self.last or det)
-                self.agrees(self.last.position, self.mean.fast_sum / self.mean.n)
                 self.mean.fitted(self.last.position)
             except DetectionError as e:
                 self.last, failure = None, f'on the mean of {self.mean.n} frames at rest: {e}'
@@ -169,11 +165,3 @@ class RestCorrection:
         if position is None:
             return det, failure
         return replace(det, position=position, method=f'{det.method}+{self.label} mean'), failure
-
-    def agrees(self, accurate_position, fast_position):
-        """Raise DetectionError unless the two positions' outlines are within motion_px."""
-        off = np.abs(np.subtract(self.outline(accurate_position), self.outline(fast_position)))
-        if np.max(off) > self.switch.motion_px:
-            raise DetectionError(f"its outline is {np.max(off):.2f} px from the fast method's "
-                                 f'(centre {off[0]:.2f}, {off[1]:.2f}, radius {off[2]:.2f} px): '
-                                 'not used')

@@ -85,7 +85,7 @@ class SphereDetectorNode(Node):
         self.rest = None                # the fast method corrected at rest (rest_method)
         if self.rest_method and self.rest_method != self.method:
             self.rest = RestCorrection(float(p['rest_motion_px']), int(p['rest_frames']),
-                                       self.rest_fit, self.rest_method, self.outline,
+                                       self.rest_fit, self.rest_method,
                                        bool(p['rest_every_frame']))
         self.frames = max(1, int(p['frames']))
         self.max_rms = float(p['max_fit_rms_px'])
@@ -162,10 +162,6 @@ class SphereDetectorNode(Node):
         """Run the rest method on an image from a seed (RestCorrection's accurate method)."""
         return detector.detect(image, self.camera, self.radius, self.rest_method, seed,
                                self.gamma, search=False)
-
-    def outline(self, position):
-        """Return a ball's image centre and apparent radius (u, v, r), px."""
-        return (*self.camera.project(position), self.camera.apparent_radius(position, self.radius))
 
     def publish(self, det, header, frames):
         header.frame_id = header.frame_id or 'camera_optical'

@@ -13,10 +13,6 @@ NOISE = 2.0                     # grey levels per frame
 CAM = vision_camera.default()
 
 
-def outline(position):
-    return (*CAM.project(position), CAM.apparent_radius(position, R))
-
-
 def test_rest_after_enough_still_frames_and_again_after_a_move_or_a_lost_frame():
     switch = RestSwitch(motion_px=0.3, frames=3)
     # the first frame has nothing to compare with; then three still frames make it rest
@@ -67,7 +63,7 @@ def rest_means(C, frames, rng):
         fits.append(image)
         return detector.detect(image, CAM, R, 'model', seed, search=False)
 
-    rest = RestCorrection(0.3, 3, accurate, 'model', outline)
+    rest = RestCorrection(0.3, 3, accurate, 'model')
     per_frame, corrected, last, prior = [], [], None, None
     for _ in range(frames):
         image = np.clip(np.rint(clean + NOISE * rng.standard_normal(clean.shape)), 0, 255)
@@ -111,7 +107,7 @@ def test_a_failed_fit_at_rest_keeps_the_last_correction_and_says_why():
             raise detector.DetectionError('misfit')
         return replace(seed, position=np.array([0.0, 0.0, 0.301]))
 
-    rest = RestCorrection(0.3, 1, accurate, 'model', outline)
+    rest = RestCorrection(0.3, 1, accurate, 'model')
     fast = detector.Detection(np.array([0.0, 0.0, 0.3]), np.eye(3) * 1e-10, np.zeros((0, 2)),
                               0.1, 'conic')
     image = np.zeros((4, 5), np.uint8)
@@ -136,26 +132,10 @@ def test_every_frame_at_rest_publishes_the_accurate_method_on_the_frame_itself()
         seen.append((int(image[0, 0]), seed))
         return replace(seed, position=seed.position + 1e-4, method='model')
 
-    rest = RestCorrection(0.3, 1, accurate, 'model', outline, every_frame=True)
+    rest = RestCorrection(0.3, 1, accurate, 'model', every_frame=True)
     fast = detector.Detection(np.array([0.0, 0.0, 0.3]), np.eye(3) * 1e-10, np.zeros((0, 2)),
                               0.1, 'conic')
     out = [rest.update(np.full((4, 5), k, np.uint8), fast, (320.0, 240.0))[0] for k in range(4)]
     assert out[0] is fast and [m.method for m in out[1:]] == ['model'] * 3
     # each frame's own image, seeded by the frame before's fit (the first by the fast one)
     assert [v for v, _ in seen] == [1, 2, 3] and seen[0][1] is fast and seen[1][1] is out[1]
-
-
-def test_a_fit_at_rest_whose_outline_is_not_the_fast_one_is_refused():
-    # a fit on the mean image that slid onto another edge would move every frame of the rest
-    far = np.array([0.0, 0.01, 0.3])                         # 20 px away on the image
-
-    def accurate(image, seed):
-        return replace(seed, position=far)
-
-    rest = RestCorrection(0.3, 1, accurate, 'model', outline)
-    fast = detector.Detection(np.array([0.0, 0.0, 0.3]), np.eye(3) * 1e-10, np.zeros((0, 2)),
-                              0.1, 'conic')
-    image = np.zeros((4, 5), np.uint8)
-    rest.update(image, fast, (320.0, 240.0))
-    det, failure = rest.update(image, fast, (320.0, 240.0))
-    assert det is fast and failure.startswith('on the mean of 1 frames at rest: its outline is')
