@@ -493,24 +493,24 @@ def rest_pair(c, kw, rng, frames, averaged):
         return fit
 
     ways = [RestCorrection(0.3, 3, accurate(k), 'model', every_frame=k == 0) for k in (0, 1)]
-    prior, measured, corrected = None, ([], []), {True: 0, False: 0}
+    prior, measured, corrected = None, ([], []), [0, 0]
     for _ in range(frames):
         image = cm.render(CAM, c, R, rng, **kw)
         fast = attempt(image, CAM, 'conic', gamma, prior)
         if isinstance(fast, str):
             return None
         prior = fast
-        for way, P in zip(ways, measured):
+        for k, way in enumerate(ways):
             det, _ = way.update(image, fast, CAM.project(fast.position))
             if way.switch.still >= way.switch.frames:    # at rest: what the node publishes
-                P.append(det.position)
-                corrected[way.every_frame] += det is not fast
+                measured[k].append(det.position)
+                corrected[k] += det is not fast
     errors = []
     for P in measured:
         along, across = split(np.mean(P[-averaged:], axis=0) - c, c)
         errors += [float(along) * 1e3, float(np.linalg.norm(across)) * 1e3]
     return (cpu[0], errors[0], errors[1], cpu[1], errors[2], errors[3], fits[1],
-            corrected[True] / len(measured[0]), corrected[False] / len(measured[1]))
+            corrected[0] / len(measured[0]), corrected[1] / len(measured[1]))
 
 
 def main():

@@ -15,9 +15,10 @@ at the last fit, mean(f_1 .. f_j) their fast detections' mean: the accurate meth
 the ball at rest, with the frame's own noise and any slow drift from the fast one. The fast
 detections' mean, not the fast method on M_j, is subtracted: the fast method's own
 noise-dependent bias cancels in f_k - mean(f) (the conic on M_j was up to 0.06 mm off in depth at
-0.38 m). Averaged over a rest, p_k has the mean and about the spread of a mean of per-frame fits
-(measured on four balls at 0.25-0.40 m: benchmarks/vision.py, "at rest") for a tenth of the fits:
-each fit starts from the last, so the noise levels of the first, one-frame fit weight them all. (A
+0.38 m). Averaged over a rest on the hand camera's own scene, p_k had the mean and about the
+spread of a mean of per-frame fits (four balls at 0.25-0.40 m, offline) for a tenth of the fits:
+each fit starts from the last, so the noise levels of the first, one-frame fit weight them all; on
+scenes the model misfits the two differ (benchmarks/vision.py, section 5 "at rest"). (A
 fit of a mean image from a cold start is weighted by its own, lower, noise and lands near the fit
 of a noise-free render, from which the per-frame fits' mean was 0.06-0.14 mm farther in depth at
 those poses.) RestCorrection is the sphere_detector node's step per frame. A mean image is only of
@@ -118,9 +119,8 @@ class RestCorrection:
     returns its Detection or raises DetectionError; ``label`` names it in the corrected
     detections' method ('conic+model mean'). It must measure the ball it is seeded with, never
     search for one (detector.detect(search=False)): a fit of another ball would move every frame
-    of the rest. ``every_frame``: the
-    accurate method on every frame at rest instead (its own detection published), as the node
-    measured before MeanCorrection: log2(n) + 1 fits become n.
+    of the rest. ``every_frame``: the accurate method on every frame at rest instead (its own
+    detection published), as the node measured before MeanCorrection: log2(n) + 1 fits become n.
     """
 
     def __init__(self, motion_px, frames, accurate, label, every_frame=False):

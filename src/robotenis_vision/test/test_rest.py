@@ -1,4 +1,4 @@
-"""The switch between the fast method while the ball moves and the accurate one at rest."""
+"""At rest: the switch to the accurate method, and the fast one corrected from mean images."""
 from dataclasses import replace
 
 import numpy as np
