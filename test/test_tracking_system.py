@@ -88,4 +88,6 @@ def test_the_feedforward_removes_most_of_the_lag(runs):
 def test_without_the_tracker_the_robot_stops_and_the_ball_gets_away(runs):
     _, off, effector = runs
     assert 1e3 * np.max(np.linalg.norm(effector - effector[0], axis=1)) < HOLD_MM
+    assert len(off.true), (f'none of the {off.frames} frames scored: the probe has '
+                           f'{len(effector)} truth samples in the window')
     assert np.mean(off.true) > np.mean(off.ball_speed) / pbvs.K_P
