@@ -75,7 +75,8 @@ class HandCameraNode(Node):
         self.image_pub = self.create_publisher(Image, 'camera/image_raw', qos_profile_sensor_data)
         self.info_pub = self.create_publisher(CameraInfo, 'camera/camera_info',
                                               qos_profile_sensor_data)
-        self.ball_pub = self.create_publisher(PointStamped, 'sim/ball_position', 10)
+        # the truth is for scorers, which may be busy for a moment: keep 0.8 s of frames for them
+        self.ball_pub = self.create_publisher(PointStamped, 'sim/ball_position', 100)
         self.create_subscription(PointStamped, 'sim/effector_position', self.on_effector, 10)
         self.frames = camera_model.FrameClock(rate) if p['tick_on_effector'] else None
         if self.frames is None:

@@ -98,7 +98,8 @@ class SimMotorsNode(Node):
         self.truth_decimation = max(1, int(p['truth_decimation']))
         self.clock_decimation = max(1, int(p['clock_decimation']))
         self.joint_pub = self.create_publisher(JointState, 'joint_states', 10)
-        self.truth_pub = self.create_publisher(PointStamped, 'sim/effector_position', 10)
+        # the truth is for scorers, which may be busy for a moment: keep 0.4 s of samples for them
+        self.truth_pub = self.create_publisher(PointStamped, 'sim/effector_position', 100)
         self.clock_pub = (self.create_publisher(ClockMsg, '/clock', 10) if self.publish_clock
                           else None)
         self.create_subscription(JointState, 'motor_velocity_cmd', self.on_command, 10)
