@@ -48,6 +48,7 @@ MIN_FRACTION = 0.4             # of the outline's profiles must find the edge wi
 MIN_ARC = np.deg2rad(200)      # the outline points must cover this much of the outline
 BLUR_GUESS = 1.0               # px: the first profiles' blur, before the frame's is estimated
 PRIOR_MIN_FRACTION = 0.6       # profiles that must find the edge near a prior's outline
+PRIOR_KEEP = 0.8               # or this much of the prior's own fraction, if that was lower
 
 
 def check_image(image, camera):
@@ -85,8 +86,8 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=
     if prior is not None and method != 'baseline':
         try:
             return measure(img, camera, radius, method, np.asarray(prior.position, dtype=float),
-                           prior.extra.get('psf_sigma', BLUR_GUESS), gamma,
-                           prior.extra.get('noise_levels'))
+                           prior.extra.get('psf_sigma'), gamma,
+                           prior.extra.get('noise_levels'), prior.extra.get('edge_fraction'))
         except DetectionError:
             if not search:
                 raise
@@ -95,7 +96,7 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=
     found, failures = [], []
     for sphere in find(img, camera, radius):
         try:
-            det = measure(img, camera, radius, method, sphere.c, BLUR_GUESS, gamma)
+            det = measure(img, camera, radius, method, sphere.c, None, gamma)
         except DetectionError as e:
             failures.append(str(e))
             continue
@@ -128,7 +129,7 @@ def _model_view(img, camera, radius, det, c, gamma):
     if det.method == 'model':
         return det
     try:
-        return measure(img, camera, radius, 'model', c, BLUR_GUESS, gamma)
+        return measure(img, camera, radius, 'model', c, None, gamma)
     except DetectionError:
         return None
 
@@ -195,23 +196,25 @@ def find(img, camera, radius):
     return spheres[:MEASURED]
 
 
-def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None):
+def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
+            edge_fraction=None):
     """
     Measure the sphere whose outline lies near that of sphere c0 (m), by ``method``.
 
     DetectionError when its edge is not seen around MIN_ARC of the outline, or the fit misfits.
     A ball's edge changes sign (brighter or darker than its background) a few times around it at
-    most; a checkerboard's or a texture's, all the time (MAX_FLIPS). From a search's
-    start (``blur`` BLUR_GUESS) the model is fitted twice: first without the limb's shading, which
-    pulls an outline a pixel or two off into place; from a previous frame's model fit, its
-    ``noise_levels`` settle the robust weights at once (model_fit.fit).
+    most; a checkerboard's or a texture's, all the time (MAX_FLIPS). ``blur``: a previous frame's
+    (px), or None from a search; then the model is fitted twice: first without the limb's
+    shading, which pulls an outline a pixel or two off into place. From a previous frame's model
+    fit, its ``noise_levels`` settle the robust weights at once (model_fit.fit); its
+    ``edge_fraction`` (extra 'edge_fraction' of an outline method's) sets what ``outline`` needs.
     """
     if method == 'baseline':
         centre = camera.project(c0)
         r = camera.apparent_radius(c0, radius)
         return baseline.detect(img, camera, radius, centre, r)
     if method == 'model':
-        if blur == BLUR_GUESS:
+        if blur is None:
             first = model_fit.fit(img, camera, radius, c0, 1.5, gamma, iterations=4, limb=False)
             c0, blur = first.c, first.blur
         fit = model_fit.fit(img, camera, radius, c0, blur, gamma, noise_levels=noise_levels)
@@ -232,7 +235,7 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None)
                          {'psf_sigma': fit.blur, 'noise': fit.noise, 'coverage': covered,
                           'rms': fit.rms, 'kept': fit.kept, 'iterations': fit.iterations,
                           'step': float(np.median(step)), 'noise_levels': fit.noise_levels})
-    ideal, pf, sigma, c_out = outline(img, camera, radius, c0, blur)
+    ideal, pf, sigma, c_out, fraction = outline(img, camera, radius, c0, blur, edge_fraction)
     xy = camera.to_normalized(ideal)
     weights = 1.0 / np.maximum(pf.sigma_e, 0.02) ** 2      # floored: no point outweighs the rest
     if method in ('paper', 'tangent'):
@@ -244,7 +247,7 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None)
     else:
         det = _conic(xy, ideal, camera, radius, weights, c_out)
         _check_arc(det.edge_points, camera.to_pixels(det.position[:2] / det.position[2]))
-    det.extra['psf_sigma'] = sigma
+    det.extra.update(psf_sigma=sigma, edge_fraction=fraction)
     return det
 
 
@@ -264,13 +267,17 @@ def _conic(xy, ideal, camera, radius, weights, c0):
                      'conic', {'correlation_inflation': inflation})
 
 
-def outline(img, camera, radius, c, blur):
+def outline(img, camera, radius, c, blur, prior_fraction=None):
     """
     Measure the outline points, in ideal pixels, of the sphere whose outline is near sphere c's.
 
-    Returns the points (n, 2), their edges.ProfileFit, the frame's blur sigma (px) and the sphere
-    (m) whose outline the profiles were laid along. ``blur``: the blur (px) to start from; it is
-    estimated again unless it is a previous frame's (not BLUR_GUESS).
+    Returns the points (n, 2), their edges.ProfileFit, the frame's blur sigma (px), the sphere
+    (m) whose outline the profiles were laid along and the fraction of its profiles that found
+    the edge. ``blur``: a previous frame's blur (px), kept; None from a search: estimated,
+    starting from BLUR_GUESS. From a previous frame, the edge must be found on PRIOR_MIN_FRACTION
+    of the outline, or on PRIOR_KEEP of ``prior_fraction``, that frame's fraction, if less: a
+    ball whose side in shadow does not stand out of a dark background shows its edge on less of
+    its outline in every frame, and would otherwise be searched for again each time.
 
     The profiles look for the edge within edges.REACH of the predicted outline; when the outline
     found lies near that limit on average, the prediction was off and the profiles are laid again
@@ -278,7 +285,8 @@ def outline(img, camera, radius, c, blur):
     """
     c = np.asarray(c, dtype=float)
     # the blur is the lens's: with a prior of the same scene it is kept
-    refit = from_search = blur == BLUR_GUESS
+    refit = from_search = blur is None
+    blur = BLUR_GUESS if from_search else blur
     for attempt in range(3):
         pts, normals, kappa, fit, blur = _profiles(img, camera, c, radius, blur, refit)
         refit = False
@@ -293,12 +301,17 @@ def outline(img, camera, radius, c, blur):
     if moved >= 0.5 * edges.REACH:
         raise DetectionError(f'the outline keeps moving ({moved:.1f} px on average): '
                              'no stable edge')
-    if not from_search and fit.ok.mean() < PRIOR_MIN_FRACTION:
-        raise DetectionError('the outline is not where the prior puts it')
+    fraction = float(fit.ok.mean())
+    least = PRIOR_MIN_FRACTION
+    if prior_fraction is not None:
+        least = min(least, PRIOR_KEEP * prior_fraction)
+    if not from_search and fraction < least:
+        raise DetectionError(f'the outline is not where the prior puts it (its edge found on '
+                             f'{100 * fraction:.0f} % of it, {100 * least:.0f} % needed)')
     keep = fit.ok
     points = pts[keep] + fit.e[keep, None] * normals[keep]
     fields = ('e', 'sigma_e', 'contrast', 'rms', 'ok', 'inside')
-    return points, edges.ProfileFit(*(getattr(fit, k)[keep] for k in fields)), blur, c
+    return points, edges.ProfileFit(*(getattr(fit, k)[keep] for k in fields)), blur, c, fraction
 
 
 def _profiles(img, camera, c, radius, blur, refit_blur):
