@@ -121,7 +121,6 @@ class Sphere:
     score: float               # fraction of the rays with an outline point on its outline
     points: np.ndarray         # (k, 2) those points, ideal pixels
     candidate: Candidate
-    roughness: float = 0.0     # the interior's median |Laplacian| over a smooth image's
 
 
 RAY_SPACING_PX = 3.0
@@ -224,36 +223,4 @@ def confirm(image, camera, R, candidate, rng=None):
         c = conic.sphere_from_conic(conic.taubin(camera.to_normalized(chosen)), R)
     except conic.ConicError:
         c = C[best]
-    return Sphere(c, float(inl.sum() / len(ok)), chosen, candidate,
-                  _roughness(image, camera, chosen))
-
-
-def _roughness(image, camera, outline):
-    """
-    Return how rough the image is inside an outline: median |Laplacian| over white noise's.
-
-    A ball's interior is smooth shading (about 1: the noise alone; a highlight is a small part of
-    it); a patch of checkerboard or fine texture is not. The noise is the image's own, from the
-    differences of horizontal neighbours (median: robust to edges).
-    """
-    uv = camera.distort_pixels(outline)
-    centre = uv.mean(axis=0)
-    inner = centre + 0.7 * (uv - centre)
-    lo = np.floor(inner.min(axis=0)).astype(int)
-    hi = np.ceil(inner.max(axis=0)).astype(int)
-    h, w = image.shape
-    lo, hi = np.maximum(lo, 1), np.minimum(hi, [w - 2, h - 2])
-    if np.any(hi - lo < 3):
-        return np.inf
-    patch = image[lo[1] - 1:hi[1] + 2, lo[0] - 1:hi[0] + 2]
-    lap = np.abs(4 * patch[1:-1, 1:-1] - patch[:-2, 1:-1] - patch[2:, 1:-1] - patch[1:-1, :-2]
-                 - patch[1:-1, 2:])
-    vv, uu = np.mgrid[lo[1]:hi[1] + 1, lo[0]:hi[0] + 1]
-    rel = np.stack([uu - centre[0], vv - centre[1]], axis=-1)
-    radius = np.median(np.linalg.norm(inner - centre, axis=1))
-    mask = np.linalg.norm(rel, axis=-1) < radius
-    if mask.sum() < 9:
-        return np.inf
-    noise = 1.4826 * np.median(np.abs(np.diff(image[::4, ::2], axis=1))) / np.sqrt(2) + 0.3
-    # 4-neighbour Laplacian of white noise sigma: std sqrt(20) sigma, median |.| 0.674 of it
-    return float(np.median(lap[mask]) / (0.674 * np.sqrt(20) * noise))
+    return Sphere(c, float(inl.sum() / len(ok)), chosen, candidate)
