@@ -13,14 +13,14 @@ Methods (all return the sphere centre in the optical frame, m, with a covariance
 * ``'baseline'``: a midpoint threshold, the largest round contour, OpenCV's fitEllipse
   (robotenis_vision.baseline).
 
-Without a prior the balls are looked for (robotenis_vision.search): radial-symmetry votes give
-candidates, the steep points of rays from each must agree on one sphere of the known radius
-(RANSAC), and the best of those are measured; each must show its edge around MIN_ARC of its
-outline. Two balls measured in the image, each clear to the model fit (its edge around the
-outline, its pixels kept: SECOND_BALL) and alike (contrast and blur: _alike), make it
-ambiguous: it is refused (DetectionError), by every method. With a prior (the previous frame's
-Detection), the outline is measured where it was, and the search runs only if it is not found
-there.
+Without a prior the balls are looked for (robotenis_vision.search): open discs, sharp round
+outlines and radial-symmetry votes give candidates, the steep points of rays from each must agree
+on one sphere of the known radius (RANSAC), and the best of those are measured; each must show
+its edge around MIN_ARC of its outline. Two balls measured in the image, each clear to the model
+fit (its edge around the outline, its pixels kept: SECOND_BALL) and alike (contrast and blur:
+_alike), make it ambiguous: it is refused (DetectionError), by every method. With a prior (the
+previous frame's Detection), the outline is measured where it was, and the search runs only if
+it is not found there.
 
 The outline is measured in ideal (undistorted) pixels, K [x, y, 1] for the ray (x, y, 1): there the
 sphere's outline is exactly an ellipse. Frames that cannot be trusted raise DetectionError with
@@ -33,12 +33,14 @@ from robotenis_vision import baseline, conic, edges, model_fit, paper_method, se
 from robotenis_vision.detection import Detection, DetectionError, RANGE
 
 METHODS = ('model', 'conic', 'paper', 'tangent', 'baseline')
-CANDIDATES = 24                # vote peaks whose outline is checked
 MIN_SCORE = 0.5                # of the rays from a candidate must agree on its sphere
 MEASURED = 3                   # confirmed spheres measured, best first
 MAX_RMS = 2.5                  # model fit: residual RMS over the noise beyond which it misfits
 MIN_KEPT = 0.6                 # model fit: of the pixels its robust weights must keep
 MAX_FLIPS = 6                  # sign changes of the edge's step around the outline, at most
+# unless its limb varies less than this against its step (ModelFit.limb_variation): the 95th
+# percentile of the balls of benchmarks/vision.py's scenes on the project's renderer
+MAX_LIMB_VARIATION = 0.3
 SECOND_BALL = 0.75             # a ball this clear (_clarity) makes a second one ambiguous
 SECOND_STEP, SECOND_BLUR = 0.5, 2.0   # and if alike (_alike)
 MIN_ARC_MODEL = np.deg2rad(160)  # the model fits the known sphere to a shorter arc
@@ -169,12 +171,15 @@ def find(img, camera, radius):
     """
     Return the spheres whose outline the image shows, best first (robotenis_vision.search).
 
-    The vote peaks (and the rough circle of edges.rough_circle, which a clean image gives fastest)
-    are confirmed by their rays; at most MEASURED distinct spheres with MIN_SCORE of their rays on
+    The candidates of robotenis_vision.search (the rough circle of edges.rough_circle first, which
+    a clean image gives fastest; then the open discs, the sharp outlines, the coarse votes) are
+    confirmed by their rays; at most MEASURED distinct spheres with MIN_SCORE of their rays on
     the outline, within RANGE of the camera.
     """
     r_min, r_max = camera.fx * radius / RANGE[1], camera.fx * radius / RANGE[0]
-    candidates = search.candidates(img, r_min, r_max)[:CANDIDATES]
+    candidates = (search.open_discs(img, r_min, r_max)
+                  + search.sharp_candidates(img, r_min, r_max)
+                  + search.candidates(img, r_min, r_max))
     try:
         centre, r = edges.rough_circle(img, r_min, r_max)
         candidates.insert(0, search.Candidate(centre, r, 1.0))
@@ -202,8 +207,10 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
     Measure the sphere whose outline lies near that of sphere c0 (m), by ``method``.
 
     DetectionError when its edge is not seen around MIN_ARC of the outline, or the fit misfits.
-    A ball's edge changes sign (brighter or darker than its background) a few times around it at
-    most; a checkerboard's or a texture's, all the time (MAX_FLIPS). ``blur``: a previous frame's
+    A ball's edge changes sign (brighter or darker than its background) a few times around it, or
+    often on a checkerboard, but its limb stays smooth; a false outline on a pattern changes sign
+    all the time and its inner side jumps with the outer one (MAX_FLIPS and MAX_LIMB_VARIATION
+    together). ``blur``: a previous frame's
     (px), or None from a search; then the model is fitted twice: first without the limb's
     shading, which pulls an outline a pixel or two off into place. From a previous frame's model
     fit, its ``noise_levels`` settle the robust weights at once (model_fit.fit); its
@@ -220,9 +227,11 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
         fit = model_fit.fit(img, camera, radius, c0, blur, gamma, noise_levels=noise_levels)
         covered = fit.coverage()
         flips = fit.polarity_flips()
-        if flips > MAX_FLIPS:
-            raise DetectionError(f'the outline changes polarity {flips} times: a pattern of the '
-                                 'background, not a ball')
+        limb = fit.limb_variation()
+        if flips > MAX_FLIPS and limb > MAX_LIMB_VARIATION:
+            raise DetectionError(f'the outline changes polarity {flips} times and its inner side '
+                                 f'varies {limb:.2f} of its step: a pattern of the background, '
+                                 'not a ball')
         if covered < MIN_ARC_MODEL:
             raise DetectionError(f'outline seen over only {np.degrees(covered):.0f} deg '
                                  '(low contrast against the background)')
@@ -234,7 +243,8 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
         return Detection(fit.c, fit.cov, edge, float('nan'), 'model',
                          {'psf_sigma': fit.blur, 'noise': fit.noise, 'coverage': covered,
                           'rms': fit.rms, 'kept': fit.kept, 'iterations': fit.iterations,
-                          'step': float(np.median(step)), 'noise_levels': fit.noise_levels})
+                          'step': float(np.median(step)), 'noise_levels': fit.noise_levels,
+                          'limb_variation': limb})
     ideal, pf, sigma, c_out, fraction = outline(img, camera, radius, c0, blur, edge_fraction)
     xy = camera.to_normalized(ideal)
     weights = 1.0 / np.maximum(pf.sigma_e, 0.02) ** 2      # floored: no point outweighs the rest

@@ -369,6 +369,27 @@ class ModelFit:
         sign = np.sign(step)
         return int(np.sum(sign != np.roll(sign, 1)))
 
+    def limb_variation(self):
+        """
+        Return how rough the ball's side of the outline is, against its edge's step.
+
+        The RMS of the bins' limb levels a0 about their least-squares Fourier series of order 2
+        in the outline's direction (bins with 8 pixels of weight or more), over the median step
+        |a0 - b0| of the edge bins. A Lambertian ball's limb, amb + D max(0, cos(phi - phi_l)),
+        leaves 3 % of D past order 2; a false outline on a pattern (a checkerboard, a texture)
+        crosses inside it what it crosses outside, and its inner levels jump like the outer ones.
+        """
+        n = np.bincount(self.annulus.bins, self.weights > 0, minlength=len(self.levels))
+        used, edge = n >= 8, self.edge_bins()
+        phi = self.annulus.bin_angle[used]
+        A = np.column_stack([np.ones_like(phi), np.cos(phi), np.sin(phi), np.cos(2 * phi),
+                             np.sin(2 * phi)])
+        if len(phi) <= 2 * A.shape[1] or not edge.any():
+            return np.inf
+        a0 = self.levels[used, 2]
+        rough = np.sqrt(np.mean((a0 - A @ np.linalg.lstsq(A, a0, rcond=None)[0]) ** 2))
+        return float(rough / np.median(np.abs(self.levels[edge, 2] - self.levels[edge, 0])))
+
     @property
     def kept(self):
         """Return the fraction of the pixels' weight the robust weights leave: 1 for all of it."""

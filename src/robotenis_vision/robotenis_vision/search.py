@@ -1,14 +1,25 @@
 """
-Where the balls are in an image, without a prior: radial-symmetry votes on a shrunk image.
+Where the balls are in an image, without a prior: three sources of candidates, then confirmation.
 
-The image is shrunk ``FACTOR`` times (area average: a checkerboard of squares under FACTOR px turns
-grey); each pixel whose gradient stands out of the image's noise votes for the centres one radius
-away along its gradient, on both sides (the ball's outline may be brighter or darker than its
-background, and change along it), for every radius of the working range. The votes of a disc's
-outline all meet at its centre at its radius; a straight edge's spread along a line, a square's
-over a cross, texture's over everything. Peaks of the votes, normalised by the circumference, are
-the candidates: centre and radius to about a shrunk pixel. A candidate inside a bigger one (the
-highlight, the terminator on the ball) is dropped.
+``candidates``: radial-symmetry votes on a shrunk image. The image is shrunk ``Voting.factor``
+times (area average: a checkerboard of squares under that many px turns grey); each pixel whose
+gradient stands out of the image's noise votes for the centres one radius away along its
+gradient, on both sides (the ball's outline may be brighter or darker than its background, and
+change along it), for every radius of the working range. The votes of a disc's outline all meet
+at its centre at its radius; a straight edge's spread along a line, a square's over a cross,
+texture's over everything. Peaks of the votes, normalised by the circumference, are the
+candidates: centre and radius to about a shrunk pixel. A candidate inside a bigger one (the
+highlight, the terminator on the ball) is dropped. COARSE votes find a ball on a plain
+background; on a texture its peak drowns among the texture's.
+
+``sharp_candidates``: FINE votes (half the shrinking, thin edges: one pixel across each, so that a
+blurred texture's wide edges do not outvote the ball's sharp outline), ranked by how much of a
+circle of one radius a strong edge runs along (``outline_score``, on the whole image's gradient).
+
+``open_discs``: the largest round regions no edge crosses (Canny's edges, their distance
+transform): the ball's smooth shading is one, a fine checkerboard's squares are small ones.
+
+``confirm`` then checks a candidate's outline against the sphere of the known radius.
 """
 from dataclasses import dataclass
 
@@ -17,14 +28,30 @@ import numpy as np
 
 from robotenis_vision import conic, edges
 
-FACTOR = 4
 RADIUS_STEP = 1.15             # ratio between the radii voted for
 EDGE_SIGMAS = 4.0              # a vote needs a gradient this many noise sigmas strong
-MIN_SUPPORT = 0.15             # of the circumference must vote for a candidate
-MAX_EDGES = 12000              # strongest gradient pixels that vote
-MAX_CANDIDATES = 24
-PER_RADIUS = 3                 # candidates of one radius at most (a pattern's are alike)
 OUTER_SUPPORT = 0.4            # of a peak's support an outer ring at its centre needs
+
+
+@dataclass(frozen=True)
+class Voting:
+    """How ``candidates`` votes."""
+
+    factor: int                # the image is shrunk this many times
+    thin: bool                 # only the gradient's maxima across an edge vote
+    min_support: float         # of the circumference (as pixels across it) voting for a peak
+    max_edges: int             # gradient pixels that vote, at most (evenly spread)
+    most: int                  # candidates returned, at most
+    per_radius: int            # of one radius voted for at most (a pattern's are alike)
+
+
+COARSE = Voting(factor=4, thin=False, min_support=0.15, max_edges=12000, most=24, per_radius=3)
+FINE = Voting(factor=2, thin=True, min_support=0.3, max_edges=40000, most=60, per_radius=6)
+SHARP = 8                      # FINE candidates kept, best outline_score first
+RAYS = 48                      # rays of outline_score and open_discs
+ON_OUTLINE_PX = 1.5            # outline_score: a ray's step this close to the common radius
+OPEN_DISCS = 4                 # open_discs kept
+CANNY_SIGMAS = 3.0             # Canny's low threshold, noise sigmas of the smoothed gradient
 
 
 @dataclass
@@ -35,38 +62,56 @@ class Candidate:
     outer: float = 0.0         # px: the largest radius about as well supported (an outer ring)
 
 
-def _edges(small):
+def _noise(image):
+    """Return the pixel noise (grey levels) from horizontal neighbours' differences (robust)."""
+    return 1.4826 * np.median(np.abs(np.diff(image, axis=1))) / np.sqrt(2)
+
+
+def _thin(gx, gy, mag):
+    """Return where the gradient magnitude is a maximum across the edge (4 directions)."""
+    direction = np.round(np.arctan2(gy, gx) / (np.pi / 4)).astype(int) % 4
+    pad = np.pad(mag, 1)
+    h, w = mag.shape
+    keep = np.zeros(mag.shape, bool)
+    for d, (dy, dx) in enumerate(((0, 1), (1, 1), (1, 0), (1, -1))):
+        ahead = pad[1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+        behind = pad[1 - dy:1 - dy + h, 1 - dx:1 - dx + w]
+        keep |= (direction == d) & (mag >= ahead) & (mag >= behind)
+    return keep
+
+
+def _edges(small, voting):
     """Return the voting pixels: positions (n, 2), unit gradients (n, 2), of a shrunk image."""
     gx = cv2.Sobel(small, cv2.CV_32F, 1, 0, ksize=3)
     gy = cv2.Sobel(small, cv2.CV_32F, 0, 1, ksize=3)
     mag = cv2.magnitude(gx, gy)
-    # the noise of the gradient: from the image's finest differences, robust to edges
-    fine = np.abs(np.diff(small, axis=1)).ravel()
-    noise = 1.4826 * np.median(fine) / np.sqrt(2) + 1e-3
     # a 3x3 Sobel of white noise sigma has a magnitude of about 4.4 sigma
-    threshold = max(EDGE_SIGMAS * 4.4 * noise, 4.0)
-    ys, xs = np.nonzero(mag > threshold)
+    strong = mag > max(EDGE_SIGMAS * 4.4 * (_noise(small) + 1e-3), 4.0)
+    if voting.thin:
+        strong &= _thin(gx, gy, mag)
+    ys, xs = np.nonzero(strong)
     m = mag[ys, xs]
-    if len(m) > MAX_EDGES:          # a texture: every other one (strength would favour it)
-        keep = np.linspace(0, len(m) - 1, MAX_EDGES).astype(int)
+    if len(m) > voting.max_edges:     # a texture: every other one (strength would favour it)
+        keep = np.linspace(0, len(m) - 1, voting.max_edges).astype(int)
         ys, xs, m = ys[keep], xs[keep], m[keep]
     g = np.stack([gx[ys, xs], gy[ys, xs]], axis=1) / m[:, None]
     return np.stack([xs, ys], axis=1).astype(np.float32), g
 
 
-def candidates(image, r_min, r_max, factor=FACTOR):
+def candidates(image, r_min, r_max, voting=COARSE):
     """
-    Return the ball candidates of an image (float32), strongest first.
+    Return the ball candidates of an image (float32) by votes, strongest first.
 
     ``r_min``, ``r_max``: the radii (px) a ball in the working range can have.
     """
+    factor = voting.factor
     h, w = image.shape
     small = cv2.resize(np.asarray(image, dtype=np.float32), (w // factor, h // factor),
                        interpolation=cv2.INTER_AREA)
     sh, sw = small.shape
     radii = np.exp(np.arange(np.log(max(r_min / factor, 2.5)),
                              np.log(r_max / factor) + 1e-9, np.log(RADIUS_STEP)))
-    pos, g = _edges(small)
+    pos, g = _edges(small, voting)
     if len(pos) < 8:
         return []
     # votes: every edge pixel, every radius, both directions along its gradient
@@ -86,18 +131,18 @@ def candidates(image, r_min, r_max, factor=FACTOR):
         near = cv2.blur(votes[k], (3, 3)) * 9
         support[k] = near - cv2.blur(votes[k], (9, 9)) * 9
     # an outline gives about 2 pi r votes per shrunk pixel across it, and the 3x3 Sobel makes
-    # about 2 pixels across it vote
-    support /= 2 * np.pi * radii[:, None, None] * 2.0
+    # about 2 pixels across it vote (thinned: 1)
+    support /= 2 * np.pi * radii[:, None, None] * (1.0 if voting.thin else 2.0)
     peak = support == cv2.dilate(support.max(axis=0), np.ones((3, 3), np.uint8))[None]
-    k, ys, xs = np.nonzero(peak & (support >= MIN_SUPPORT))
+    k, ys, xs = np.nonzero(peak & (support >= voting.min_support))
     order = np.argsort(-support[k, ys, xs])
     # a pattern repeats (a checkerboard's squares all vote alike at one radius), a ball does not:
-    # at most PER_RADIUS candidates of each radius voted for
+    # at most per_radius candidates of each radius voted for
     rank = np.empty(len(order), int)
     for j in np.unique(k):
         at = order[k[order] == j]
         rank[at] = np.arange(len(at))
-    order = order[rank[order] < PER_RADIUS][:MAX_CANDIDATES]
+    order = order[rank[order] < voting.per_radius][:voting.most]
     found = []
     for i in order:
         centre = (np.array([xs[i], ys[i]], dtype=float) + 0.5) * factor - 0.5
@@ -111,6 +156,83 @@ def candidates(image, r_min, r_max, factor=FACTOR):
         found.append(Candidate(centre, float(r), float(support[k[i], ys[i], xs[i]]),
                                float(max(radii[rings.max()] * factor, r))))
     return found
+
+
+def _rays():
+    phi = np.linspace(0, 2 * np.pi, RAYS, endpoint=False)
+    return np.stack([np.cos(phi), np.sin(phi)], axis=1)
+
+
+def gradients(image):
+    """Return the image's gradient (gx, gy), grey levels per px, lightly smoothed (float32)."""
+    smooth = cv2.GaussianBlur(image, (0, 0), 0.7)
+    return (cv2.Sobel(smooth, cv2.CV_32F, 1, 0, ksize=3) / 8,
+            cv2.Sobel(smooth, cv2.CV_32F, 0, 1, ksize=3) / 8)
+
+
+def outline_score(gx, gy, centre, r):
+    """
+    Return how well a strong edge runs along one circle about ``centre``: 0 for none.
+
+    Along RAYS rays from the centre, the steepest radial step between 0.75 and 1.5 r (px); the
+    rays whose step lies within ON_OUTLINE_PX (or 5 %) of their median radius are on one circle:
+    their fraction times their median step (grey levels per px). A ball's outline is a strong
+    edge at one radius all round; a texture's blob is softer, and its edge wanders.
+    """
+    u = _rays()
+    rho = np.arange(0.75 * r, 1.5 * r + 0.5, 0.5)
+    pts = np.asarray(centre, dtype=float) + rho[None, :, None] * u[:, None, :]   # (rays, K, 2)
+    mx, my = pts[..., 0].astype(np.float32), pts[..., 1].astype(np.float32)
+    ax = cv2.remap(gx, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    ay = cv2.remap(gy, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    radial = np.abs(ax * u[:, None, 0] + ay * u[:, None, 1])
+    k = np.argmax(radial, axis=1)
+    at, step = rho[k], radial[np.arange(RAYS), k]
+    common = np.median(at)
+    on = np.abs(at - common) <= max(ON_OUTLINE_PX, 0.05 * common)
+    return float(on.mean() * np.median(step[on])) if on.any() else 0.0
+
+
+def sharp_candidates(image, r_min, r_max, n=SHARP):
+    """Return the n FINE vote candidates whose outline_score is highest, best first."""
+    found = candidates(image, r_min, r_max, FINE)
+    gx, gy = gradients(image)
+    score = [outline_score(gx, gy, c.centre, c.radius) for c in found]
+    return [found[i] for i in np.argsort(score)[::-1][:n]]
+
+
+def open_discs(image, r_min, r_max, n=OPEN_DISCS):
+    """
+    Return the n largest round regions that no edge crosses, as candidates (largest first).
+
+    Canny's edges (thresholds from the image's noise) and their distance transform: a local
+    maximum rho within the working range is a disc of radius rho free of edges. It is round when
+    the edge lies near rho all round: the fraction of RAYS rays that meet an edge within 1.1 rho
+    (1 for a disc, about 0.6 for a square); candidates are ranked by rho times that fraction.
+    """
+    noise = _noise(image[::2, ::2]) + 0.5             # at least the 8-bit rounding's
+    low = CANNY_SIGMAS * 2.2 * noise                  # about 5 sigmas of the smoothed Sobel
+    smooth = cv2.GaussianBlur(np.clip(image, 0, 255).astype(np.uint8), (0, 0), 1.0)
+    edge = cv2.Canny(smooth, low, 2 * low, L2gradient=True) > 0
+    dt = cv2.distanceTransform((~edge).astype(np.uint8), cv2.DIST_L2, 5)
+    peak = ((dt == cv2.dilate(dt, np.ones((5, 5), np.uint8)))
+            & (dt >= 0.8 * r_min) & (dt <= 1.1 * r_max))
+    ys, xs = np.nonzero(peak)
+    biggest = np.argsort(dt[ys, xs])[::-1][:100]
+    u = _rays()
+    h, w = edge.shape
+    ranked = []
+    for y, x in zip(ys[biggest], xs[biggest]):
+        rho = float(dt[y, x])
+        steps = np.arange(0.0, 1.5 * rho + 3, 0.5)
+        px = np.clip(np.rint(x + u[:, :1] * steps), 0, w - 1).astype(int)
+        py = np.clip(np.rint(y + u[:, 1:] * steps), 0, h - 1).astype(int)
+        hit = edge[py, px]
+        first = np.where(hit.any(axis=1), steps[hit.argmax(axis=1)], np.inf)
+        round_ = np.mean(first <= 1.1 * rho + 1.5)
+        ranked.append((rho * round_, Candidate(np.array([x, y], dtype=float), rho, round_, rho)))
+    ranked.sort(key=lambda t: -t[0])
+    return [c for _, c in ranked[:n]]
 
 
 @dataclass

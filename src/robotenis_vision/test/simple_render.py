@@ -8,6 +8,7 @@ projectPoints (its own plumb_bob implementation) gives its pixels; cv2.fillPoly 
 the exact edge on average, so the vertices are first moved inward by half a fine pixel; then a
 Gaussian blur and Gaussian noise. The ball is uniformly bright, the background flat: what the
 camera_model renderer adds (shading, texture, distortion maps) is absent, so the two share nothing.
+``on_background`` puts the ball over a background image instead: a checkerboard, a texture.
 """
 import cv2
 import numpy as np
@@ -63,3 +64,17 @@ def render(camera, C, R, rng=None, ball=200.0, background=80.0, blur_sigma=0.8, 
     if noise_sigma > 0:
         image += noise_sigma * rng.standard_normal(image.shape).astype(np.float32)
     return np.clip(np.rint(image), 0, 255).astype(np.uint8)
+
+
+def on_background(camera, C, R, background, rng, ball=130.0, blur_sigma=0.8, noise_sigma=2.0):
+    """uint8 image of a uniform ball over ``background`` (float image, grey levels), then blur."""
+    cover = render(camera, C, R, ball=255.0, background=0.0, blur_sigma=0.0) / 255.0
+    image = cv2.GaussianBlur(background * (1 - cover) + ball * cover, (0, 0), blur_sigma)
+    image += noise_sigma * rng.standard_normal(image.shape)
+    return np.clip(np.rint(image), 0, 255).astype(np.uint8)
+
+
+def checkerboard(camera, square, low=40.0, high=210.0):
+    """Float image of a checkerboard of ``square`` px squares."""
+    v, u = np.mgrid[0:camera.height, 0:camera.width]
+    return np.where((u // square + v // square) % 2 == 0, low, high).astype(float)
