@@ -172,14 +172,16 @@ def find(img, camera, radius):
     Return the spheres whose outline the image shows, best first (robotenis_vision.search).
 
     The candidates of robotenis_vision.search (the rough circle of edges.rough_circle first, which
-    a clean image gives fastest; then the open discs, the sharp outlines, the coarse votes) are
-    confirmed by their rays; at most MEASURED distinct spheres with MIN_SCORE of their rays on
-    the outline, within RANGE of the camera.
+    a clean image gives fastest; then the open discs, the sharp outlines, the coarse votes; less
+    any lying within the disc of a bigger one, as a highlight or a shading feature on the ball
+    does, which measured as a ball reads it a few times too far) are confirmed by their rays; at
+    most MEASURED distinct spheres with MIN_SCORE of their rays on the outline, within RANGE of
+    the camera.
     """
     r_min, r_max = camera.fx * radius / RANGE[1], camera.fx * radius / RANGE[0]
-    candidates = (search.open_discs(img, r_min, r_max)
-                  + search.sharp_candidates(img, r_min, r_max)
-                  + search.candidates(img, r_min, r_max))
+    found = (search.open_discs(img, r_min, r_max) + search.sharp_candidates(img, r_min, r_max)
+             + search.candidates(img, r_min, r_max))
+    candidates = [c for c in found if not any(_inside(c, v) for v in found)]
     try:
         centre, r = edges.rough_circle(img, r_min, r_max)
         candidates.insert(0, search.Candidate(centre, r, 1.0))
@@ -199,6 +201,12 @@ def find(img, camera, radius):
         spheres.append(sphere)
     spheres.sort(key=lambda s: -s.score)
     return spheres[:MEASURED]
+
+
+def _inside(small, big):
+    """Return whether candidate ``small`` lies within the disc of a candidate 1.5x its size."""
+    return (big.radius >= 1.5 * small.radius
+            and np.linalg.norm(small.centre - big.centre) + small.radius <= 1.1 * big.radius)
 
 
 def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,

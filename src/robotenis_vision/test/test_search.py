@@ -92,3 +92,13 @@ def test_a_ball_whose_edge_flips_on_a_checkerboard_keeps_a_smooth_limb():
         assert false.limb_variation() > detector.MAX_LIMB_VARIATION
         with pytest.raises(DetectionError, match='a pattern of the background'):
             detector.measure(pattern.astype(np.float32), CAM, R, 'model', c, None)
+
+
+def test_a_candidate_within_a_bigger_ones_disc_is_left_out():
+    """A spot on the ball (a highlight) is inside the ball's candidate; a neighbour is not."""
+    ball = search.Candidate(np.array([100.0, 100.0]), 40.0, 1.0)
+    spot = search.Candidate(np.array([120.0, 90.0]), 8.0, 1.0)
+    beside = search.Candidate(np.array([150.0, 100.0]), 8.0, 1.0)
+    assert detector._inside(spot, ball) and not detector._inside(ball, spot)
+    assert not detector._inside(beside, ball)
+    assert not detector._inside(search.Candidate(np.array([100.0, 100.0]), 30.0, 1.0), ball)
