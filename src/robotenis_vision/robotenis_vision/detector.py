@@ -34,7 +34,6 @@ from robotenis_vision.detection import Detection, DetectionError, RANGE
 
 METHODS = ('model', 'conic', 'paper', 'tangent', 'baseline')
 MIN_SCORE = 0.5                # of the rays from a candidate must agree on its sphere
-NEAR = 1.5                     # the open discs and sharp outlines: radii from this times r_min
 MEASURED = 3                   # confirmed spheres measured, best first
 MAX_RMS = 2.5                  # model fit: residual RMS over the noise beyond which it misfits
 MIN_KEPT = 0.6                 # model fit: of the pixels its robust weights must keep
@@ -180,8 +179,7 @@ def find(img, camera, radius):
     the camera.
     """
     r_min, r_max = camera.fx * radius / RANGE[1], camera.fx * radius / RANGE[0]
-    near = NEAR * r_min
-    found = (search.open_discs(img, near, r_max) + search.sharp_candidates(img, near, r_max)
+    found = (search.open_discs(img, r_min, r_max) + search.sharp_candidates(img, r_min, r_max)
              + search.candidates(img, r_min, r_max))
     candidates = [c for c in found if not any(_inside(c, v) for v in found)]
     try:
