@@ -218,11 +218,11 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
     A ball's edge changes sign (brighter or darker than its background) a few times around it, or
     often on a checkerboard, but its limb stays smooth; a false outline on a pattern changes sign
     all the time and its inner side jumps with the outer one (MAX_FLIPS and MAX_LIMB_VARIATION
-    together). ``blur``: a previous frame's
-    (px), or None from a search; then the model is fitted twice: first without the limb's
-    shading, which pulls an outline a pixel or two off into place. From a previous frame's model
-    fit, its ``noise_levels`` settle the robust weights at once (model_fit.fit); its
-    ``edge_fraction`` (extra 'edge_fraction' of an outline method's) sets what ``outline`` needs.
+    together). ``blur``: a previous frame's (px), or None from a search; then the model is fitted
+    twice: first without the limb's shading, which pulls an outline a pixel or two off into
+    place. From a previous frame's model fit, its ``noise_levels`` settle the robust weights at
+    once (model_fit.fit); its ``edge_fraction`` (extra 'edge_fraction' of an outline method's)
+    sets what ``outline`` needs.
     """
     if method == 'baseline':
         centre = camera.project(c0)
