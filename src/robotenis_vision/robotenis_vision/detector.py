@@ -251,8 +251,7 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
         return Detection(fit.c, fit.cov, edge, float('nan'), 'model',
                          {'psf_sigma': fit.blur, 'noise': fit.noise, 'coverage': covered,
                           'rms': fit.rms, 'kept': fit.kept, 'iterations': fit.iterations,
-                          'step': float(np.median(step)), 'noise_levels': fit.noise_levels,
-                          'limb_variation': limb})
+                          'step': float(np.median(step)), 'noise_levels': fit.noise_levels})
     ideal, pf, sigma, c_out, fraction = outline(img, camera, radius, c0, blur, edge_fraction)
     xy = camera.to_normalized(ideal)
     weights = 1.0 / np.maximum(pf.sigma_e, 0.02) ** 2      # floored: no point outweighs the rest

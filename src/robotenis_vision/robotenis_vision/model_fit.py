@@ -348,9 +348,13 @@ class ModelFit:
         (about noise sqrt(12 / n) for n pixels with weight).
         """
         step = self.levels[:, 2] - self.levels[:, 0]
-        n = np.bincount(self.annulus.bins, self.weights > 0, minlength=len(step))
+        n = self._weighted_pixels()
         error = self.noise * np.sqrt(12 / np.maximum(n, 1))
         return (np.abs(step) > np.maximum(min_step, 4 * error)) & (n >= 8)
+
+    def _weighted_pixels(self):
+        """Return each bin's number of pixels the robust weights kept."""
+        return np.bincount(self.annulus.bins, self.weights > 0, minlength=len(self.levels))
 
     def coverage(self, min_step=8.0):
         """Return how much of the outline (rad) its edge bins cover: 2 pi less the widest gap."""
@@ -379,8 +383,7 @@ class ModelFit:
         leaves 3 % of D past order 2; a false outline on a pattern (a checkerboard, a texture)
         crosses inside it what it crosses outside, and its inner levels jump like the outer ones.
         """
-        n = np.bincount(self.annulus.bins, self.weights > 0, minlength=len(self.levels))
-        used, edge = n >= 8, self.edge_bins()
+        used, edge = self._weighted_pixels() >= 8, self.edge_bins()
         phi = self.annulus.bin_angle[used]
         A = np.column_stack([np.ones_like(phi), np.cos(phi), np.sin(phi), np.cos(2 * phi),
                              np.sin(2 * phi)])

@@ -276,7 +276,7 @@ def _ray_peaks(image, camera, centre_ideal, radius, outer):
     a = np.abs(d)
     pad = np.pad(a, ((0, 0), (1, 1)), constant_values=-1.0)
     peak = (a >= pad[:, :-2]) & (a > pad[:, 2:])
-    noise = 1.4826 * np.median(np.abs(np.diff(profiles[:, ::2], axis=1))) / np.sqrt(2) + 1e-6
+    noise = _noise(profiles[:, ::2]) + 1e-6
     # the step across each sample: means over 1.5-4.5 px beyond it on either side
     c = np.cumsum(np.pad(profiles, ((0, 0), (1, 0))), axis=1)
     k0, k1 = int(round(1.5 / edges.STEP)), int(round(4.5 / edges.STEP))
