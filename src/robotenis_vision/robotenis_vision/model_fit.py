@@ -23,12 +23,17 @@ edge. Blurred:
 
     H(-t), -t H(-t), H(t)  ->  1 - Phi, s (phi - tau (1 - Phi)), Phi          (tau = t / s)
     (sin(i) - 1) H(t)      ->  -(w2' / 2) s (tau Phi + phi) + the rest, unblurred (O(t^2))
-    cos(i) H(t)            ->  sqrt(w2' s) g(tau) + the rest, unblurred (O(t^1.5))
+    cos(i) H(t)            ->  sqrt(w2') (s^0.5 g_0.5(tau) - (kappa / 4) s^1.5 g_1.5(tau))
+                               + the rest, unblurred (O(t^2.5))
 
-where g(tau) = E[sqrt((tau + N(0, 1))^+)] (a parabolic cylinder function, tabulated), and tau is
+where g_nu(tau) = E[((tau + N(0, 1))^+)^nu] (parabolic cylinder functions, tabulated), and tau is
 taken at t - s^2 kappa / 2: a blurred curved step appears that much inside the outline (kappa its
-curvature). Known limit: where the terminator crosses the limb the shading is clamped
-(max(0, n.l)) and this model misreads it (benchmarks/vision.py measures it).
+curvature). The t^1.5 term is cos(i)'s next one: on a circle of radius 1 / kappa, cos^2(i) =
+2 kappa t - kappa^2 t^2, so cos(i) = sqrt(2 kappa t) (1 - kappa t / 4 - ...). Left unblurred it
+moved the outline by up to a quarter of a pixel at a blur of 1 px on a 19 px ball (a bright limb
+over a darker background: 0.5 % of the range). Known limit: where the terminator crosses the limb
+the shading is clamped (max(0, n.l)) and this model misreads it (benchmarks/vision.py measures
+it).
 
 Geometry. The outline is the cone of rays touching the sphere, q(u) = (r.c)^2 - (c.c - R^2) r.r = 0
 for the ray r = K^-1 (u, 1) of an ideal (undistorted) pixel u (C1 of robotenis_vision.conic). A
@@ -66,31 +71,39 @@ SCALE_FLOOR = 1.0              # grey levels: the least residual scale the weigh
 N_LEVELS = 8                   # per bin: b0, b1, a0, a1 and their slopes along the bin
 
 
-def _sqrt_edge_table(step=0.002, top=10.0):
-    """Tabulate g(tau) = E[sqrt((tau + Z)^+)] and g'(tau), Z ~ N(0, 1), on [-8, top]."""
-    tau = np.arange(-8.0, top + step / 2, step)
+TAU_LOW, TAU_STEP, TAU_TOP = -8.0, 0.002, 10.0     # the tables' range and step, blur sigmas
+
+
+@functools.lru_cache(maxsize=None)
+def _power_edge_table(nu):
+    """Tabulate g_nu(tau) = E[((tau + Z)^+)^nu] and its derivative, Z ~ N(0, 1), on the range."""
+    tau = np.arange(TAU_LOW, TAU_TOP + TAU_STEP / 2, TAU_STEP)
     # int_0^inf x^nu phi(tau - x) dx = Gamma(nu + 1) exp(-tau^2 / 4) D_{-nu-1}(-tau) / sqrt(2 pi)
-    D, Dp = pbdv(-1.5, -tau)
-    scale = gamma_function(1.5) / np.sqrt(2 * np.pi) * np.exp(-tau * tau / 4)
-    return tau[0], step, scale * D, scale * (-0.5 * tau * D - Dp)
+    D, Dp = pbdv(-nu - 1, -tau)
+    scale = gamma_function(nu + 1) / np.sqrt(2 * np.pi) * np.exp(-tau * tau / 4)
+    return scale * D, scale * (-0.5 * tau * D - Dp)
 
 
-_TAU0, _STEP, _G, _DG = _sqrt_edge_table()
+def power_edge(tau, nu):
+    """
+    Return g_nu(tau) and its derivative: x^nu H(x) blurred by N(0, 1), at tau (any shape).
 
-
-def sqrt_edge(tau):
-    """Return g(tau) and g'(tau): sqrt(x) H(x) blurred by N(0, 1), at tau (any shape)."""
+    Beyond the table, the asymptotic series tau^nu (1 + c2 / tau^2 + c4 / tau^4), c2 = nu (nu - 1)
+    / 2, c4 = nu (nu - 1) (nu - 2) (nu - 3) / 8 (the moments of Z in the binomial series).
+    """
+    G, DG = _power_edge_table(nu)
     tau = np.asarray(tau, dtype=float)
-    q = np.clip((tau - _TAU0) / _STEP, 0.0, len(_G) - 1.000001)
+    q = np.clip((tau - TAU_LOW) / TAU_STEP, 0.0, len(G) - 1.000001)
     i = q.astype(np.intp)
     f = q - i
-    g = _G[i] + f * (_G[i + 1] - _G[i])
-    dg = _DG[i] + f * (_DG[i + 1] - _DG[i])
-    far = tau > _TAU0 + _STEP * (len(_G) - 1)
+    g = G[i] + f * (G[i + 1] - G[i])
+    dg = DG[i] + f * (DG[i + 1] - DG[i])
+    far = tau > TAU_LOW + TAU_STEP * (len(G) - 1)
     if np.any(far):
         x = tau[far]
-        g[far] = np.sqrt(x) * (1 - 1 / (8 * x * x) - 15 / (128 * x ** 4))
-        dg[far] = 0.5 / np.sqrt(x) * (1 + 3 / (8 * x * x) + 105 / (128 * x ** 4))
+        c2, c4 = nu * (nu - 1) / 2, nu * (nu - 1) * (nu - 2) * (nu - 3) / 8
+        g[far] = x ** nu * (1 + c2 / x ** 2 + c4 / x ** 4)
+        dg[far] = x ** (nu - 1) * (nu + c2 * (nu - 2) / x ** 2 + c4 * (nu - 4) / x ** 4)
     return g, dg
 
 
@@ -221,7 +234,7 @@ class Geometry:
     dd_dc: np.ndarray        # (n, 3) its derivative in c, px / m
     kappa: np.ndarray        # (n,) the outline's curvature at the foot point, 1 / image px
     w2_slope: np.ndarray     # (n,) d cos^2(i) / dt at the outline, 1 / image px
-    cos_deep: np.ndarray     # (n,) cos(i) - sqrt(w2' t) inside, 0 outside
+    cos_deep: np.ndarray     # (n,) cos(i) - sqrt(w2' t) (1 - kappa t / 4) inside, 0 outside
     sin_deep: np.ndarray     # (n,) sin(i) - 1 + w2' t / 2 inside, 0 outside
 
 
@@ -256,7 +269,8 @@ def geometry(ann, camera, c, R):
         kappa, w2_slope = kappa / scale, w2_slope / scale
     inside = d > 0
     depth = np.maximum(d, 0.0)
-    cos_deep = np.where(inside, np.sqrt(np.clip(w2, 0, 1)) - np.sqrt(w2_slope * depth), 0.0)
+    cos_deep = np.where(inside, np.sqrt(np.clip(w2, 0, 1))
+                        - np.sqrt(w2_slope * depth) * (1 - 0.25 * kappa * depth), 0.0)
     sin_deep = np.where(inside, np.sqrt(np.clip(1 - w2, 0, 1)) - 1 + 0.5 * w2_slope * depth,
                         0.0)
     return Geometry(d, dd_dc, kappa, w2_slope, cos_deep, sin_deep)
@@ -279,11 +293,12 @@ def columns(geo, ann, s):
     X = np.stack([1 - Phi, s * (phi - tau * (1 - Phi)), Phi, k * ramp + geo.sin_deep], axis=1)
     dX_dt = np.stack([-phi / s, -(1 - Phi), phi / s, k * Phi], axis=1)
     dX_ds = np.stack([phi * tau / s, phi, -phi * tau / s, k * phi], axis=1)
-    g, dg = sqrt_edge(tau)
-    root = np.sqrt(geo.w2_slope)
-    h = root * np.sqrt(s) * g + geo.cos_deep
-    dh_dt = root * dg / np.sqrt(s)
-    dh_ds = root * (0.5 * g - tau * dg) / np.sqrt(s)
+    g, dg = power_edge(tau, 0.5)
+    g3, dg3 = power_edge(tau, 1.5)
+    root, k = np.sqrt(geo.w2_slope), -0.25 * geo.kappa
+    h = root * (np.sqrt(s) * g + k * s ** 1.5 * g3) + geo.cos_deep
+    dh_dt = root * (dg / np.sqrt(s) + k * np.sqrt(s) * dg3)
+    dh_ds = root * ((0.5 * g - tau * dg) / np.sqrt(s) + k * np.sqrt(s) * (1.5 * g3 - tau * dg3))
     a = ann.along[:, None]
     X, dX_dt, dX_ds = (np.hstack([m, m * a]) for m in (X, dX_dt, dX_ds))
     fourier = np.stack([np.ones(len(t)), np.cos(ann.angle), np.sin(ann.angle)], axis=1)
@@ -298,8 +313,10 @@ def _solve(X, G, y, w, ann):
 
     min sum w (y - X l_bin - G p)^2, X (n, 8) each pixel's own bin's columns, G (n, k) the global
     ones. Every bin's normal equations come from one batched product of its (padded) pixels; its
-    levels are eliminated (Schur complement). Returns p, the levels (n_bins, 8) and the inverse of
-    the Schur complement (k, k). A global column that vanishes gets no step.
+    levels are eliminated (Schur complement). Returns p, the levels (n_bins, 8), the inverse of
+    the Schur complement (k, k) and the bins' own normal matrices' inverses (n_bins, 8, 8: the
+    levels' covariance over the noise's square, p held). A global column that vanishes gets no
+    step.
     """
     m = X.shape[1]
     Z = np.hstack([X, G, y[:, None]]) * np.sqrt(w)[:, None]
@@ -321,7 +338,7 @@ def _solve(X, G, y, w, ann):
         S[np.ix_(live, live)] / np.outer(d, d), rcond=1e-12, hermitian=True) / np.outer(d, d)
     p = S_inv @ rhs
     levels = np.einsum('bij,bj->bi', inv, vb) - np.einsum('bik,k->bi', T, p)
-    return p, levels, S_inv
+    return p, levels, S_inv, inv
 
 
 @dataclass
@@ -332,6 +349,7 @@ class ModelFit:
     noise: float                   # grey levels (linearised): the pixel noise estimated
     beta: np.ndarray               # (3,) the limb's square-root shading coefficients
     levels: np.ndarray             # (n_bins, 8) per bin
+    step_sd: np.ndarray            # (n_bins,) standard error of each bin's step a0 - b0
     weights: np.ndarray            # (n,) weight of each annulus pixel
     residuals: np.ndarray          # (n,) grey levels (linearised)
     iterations: int
@@ -345,12 +363,12 @@ class ModelFit:
         Return which bins show the ball's edge: a step from background to limb out of the noise.
 
         The step is a0 - b0; a bin's needs min_step grey levels and four times its standard error
-        (about noise sqrt(12 / n) for n pixels with weight).
+        (``step_sd``, from the fit: about noise sqrt(12 / n) for n pixels with weight across a
+        sharp edge, and more where the blur makes the bin's levels hard to tell apart).
         """
         step = self.levels[:, 2] - self.levels[:, 0]
         n = self._weighted_pixels()
-        error = self.noise * np.sqrt(12 / np.maximum(n, 1))
-        return (np.abs(step) > np.maximum(min_step, 4 * error)) & (n >= 8)
+        return (np.abs(step) > np.maximum(min_step, 4 * self.step_sd)) & (n >= 8)
 
     def _weighted_pixels(self):
         """Return each bin's number of pixels the robust weights kept."""
@@ -466,7 +484,7 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
     geo = geometry(ann, camera, c, R)
     X, H = columns(geo, ann, s)[:2]
     H = H if limb else H[:, :0]
-    beta, levels, _ = _solve(X, H, y, w0, ann)
+    beta, levels = _solve(X, H, y, w0, ann)[:2]
     known = noise_levels is not None
     scale, noise, zone_noise = ((noise_levels[0], noise_levels[1], noise_levels[2:]) if known
                                 else (None, None, None))
@@ -501,7 +519,7 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
         dy_ds = np.einsum('ni,ni->n', dX_ds, lv) + dH_ds @ beta
         # linearised in c and s about the current values; levels and beta solved afresh
         G = np.column_stack([dy_dt[:, None] * geo.dd_dc, dy_ds, H])
-        p, levels, S_inv = _solve(X, G, y, w, ann)
+        p, levels, S_inv, level_inv = _solve(X, G, y, w, ann)
         dc, ds, beta = p[:3], p[3], p[4:]
         # at most MAX_STEP_PX of outline a step (the outline moves by about the image of dc)
         dc *= min(1.0, MAX_STEP_PX / max(np.max(np.abs(geo.dd_dc @ dc)), 1e-12))
@@ -523,5 +541,14 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
     H = H if limb else H[:, :0]
     r = (y - np.einsum('ni,ni->n', X, levels[ann.bins]) - H @ beta) * np.sqrt(w0)
     weight_noise, noise = noise, _noise(r, ann, w > 0)
-    return ModelFit(c, noise * noise * S_inv[:3, :3], s, noise, beta, levels, w, r, it, ann, w0,
-                    (scale, weight_noise, *zone_noise))
+    # the step's standard error from the bin's own normal equations and the larger of the noise
+    # and the bin's residuals: a blurred edge's columns and the ramps beside them can sum to a flat
+    # image, and a fit that wandered there shows a step a0 - b0 that its residuals belie
+    kept = w > 0
+    n_kept = np.bincount(ann.bins, kept, minlength=len(levels))
+    bin_ms = np.bincount(ann.bins, np.where(kept, r * r, 0.0), minlength=len(levels))
+    spread = np.maximum(noise, np.sqrt(bin_ms / np.maximum(n_kept, 1)))
+    step_sd = spread * np.sqrt(np.maximum(
+        level_inv[:, 0, 0] + level_inv[:, 2, 2] - 2 * level_inv[:, 0, 2], 0.0))
+    return ModelFit(c, noise * noise * S_inv[:3, :3], s, noise, beta, levels, step_sd, w, r, it,
+                    ann, w0, (scale, weight_noise, *zone_noise))
