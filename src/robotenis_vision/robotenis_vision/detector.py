@@ -16,7 +16,8 @@ Methods (all return the sphere centre in the optical frame, m, with a covariance
 Without a prior the balls are looked for (robotenis_vision.search): open discs, sharp round
 outlines and radial-symmetry votes give candidates, the steep points of rays from each must agree
 on one sphere of the known radius (RANSAC), and the best of those are measured; each must show
-its edge around MIN_ARC of its outline. Two balls measured in the image, each clear to the model
+its edge around MIN_ARC of its outline; a sphere seen on a bigger ball's disc is a mark on it
+(_on_ball), not a ball. Two balls measured in the image, each clear to the model
 fit (its edge around the outline, its pixels kept: SECOND_BALL) and alike (contrast and blur:
 _alike), make it ambiguous: it is refused (DetectionError), by every method. With a prior (the
 previous frame's Detection), the outline is measured where it was, and the search runs only if
@@ -37,6 +38,7 @@ MIN_SCORE = 0.5                # of the rays from a candidate must agree on its 
 MEASURED = 3                   # confirmed spheres measured, best first
 MAX_RMS = 2.5                  # model fit: residual RMS over the noise beyond which it misfits
 MIN_KEPT = 0.6                 # model fit: of the pixels its robust weights must keep
+REFITS, REFIT_PX = 3, 0.5      # model fit: again around its outline if it moved this far
 MAX_FLIPS = 6                  # sign changes of the edge's step around the outline, at most
 # unless its limb varies less than this against its step (ModelFit.limb_variation): the 95th
 # percentile of the balls of benchmarks/vision.py's scenes on the project's renderer
@@ -102,6 +104,9 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=
         except DetectionError as e:
             failures.append(str(e))
             continue
+        if any(_on_ball(camera, det.position, d.position, radius) for d, _, _ in found):
+            continue
+        found = [f for f in found if not _on_ball(camera, f[0].position, det.position, radius)]
         if not any(_same_ball(camera, det.position, d.position, radius) for d, _, _ in found):
             found.append((det, sphere.score, sphere.c))
     if not found:
@@ -193,7 +198,10 @@ def find(img, camera, radius):
         if (sphere is None or sphere.score < MIN_SCORE or not sphere.c[2] > radius
                 or not RANGE[0] <= np.linalg.norm(sphere.c) <= RANGE[1]):
             continue
-        same = [k for k, s in enumerate(spheres) if _same_ball(camera, s.c, sphere.c, radius)]
+        # a mark on a ball and the ball are kept apart: the model fit tells them (detect)
+        same = [k for k, s in enumerate(spheres) if _same_ball(camera, s.c, sphere.c, radius)
+                and not _on_ball(camera, s.c, sphere.c, radius)
+                and not _on_ball(camera, sphere.c, s.c, radius)]
         if same:
             if sphere.score > spheres[same[0]].score:
                 spheres[same[0]] = sphere
@@ -201,6 +209,20 @@ def find(img, camera, radius):
         spheres.append(sphere)
     spheres.sort(key=lambda s: -s.score)
     return spheres[:MEASURED]
+
+
+def _on_ball(camera, a, b, R):
+    """
+    Return whether sphere a (m) is a mark on the ball b: b 1.5x its size, a's disc within b's.
+
+    A ball hides whatever lies behind its disc, so a sphere two thirds its size or less seen
+    within a bigger ball's disc (as _inside: to 1.1 of its radius) is a mark on that ball (its
+    highlight, its terminator, a shading feature), measured as a ball a few times too far; not
+    a ball of its own. One that reaches out of the disc may be a ball beside it, whole.
+    """
+    ra, rb = camera.apparent_radius(a, R), camera.apparent_radius(b, R)
+    return (rb >= 1.5 * ra
+            and np.linalg.norm(camera.project(a) - camera.project(b)) + ra <= 1.1 * rb)
 
 
 def _inside(small, big):
@@ -220,19 +242,29 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
     all the time and its inner side jumps with the outer one (MAX_FLIPS and MAX_LIMB_VARIATION
     together). ``blur``: a previous frame's (px), or None from a search; then the model is fitted
     twice: first without the limb's shading, which pulls an outline a pixel or two off into
-    place. From a previous frame's model fit, its ``noise_levels`` settle the robust weights at
-    once (model_fit.fit); its ``edge_fraction`` (extra 'edge_fraction' of an outline method's)
-    sets what ``outline`` needs.
+    place; and a fit whose outline then moved REFIT_PX or more is made again from where it ended
+    (at most REFITS times): its annulus was cut around the start, and a search's sphere a few
+    pixels off (a part of the outline, a checkerboard's square beside it) leaves the fit halfway.
+    A previous frame's ball is where it was: its fit is not made again (a wrong prior must fail,
+    not wander to what lies beside it). From a previous frame's model fit, its ``noise_levels``
+    settle the robust weights at once (model_fit.fit); its ``edge_fraction`` (extra
+    'edge_fraction' of an outline method's) sets what ``outline`` needs.
     """
     if method == 'baseline':
         centre = camera.project(c0)
         r = camera.apparent_radius(c0, radius)
         return baseline.detect(img, camera, radius, centre, r)
     if method == 'model':
-        if blur is None:
+        from_search = blur is None
+        if from_search:
             first = model_fit.fit(img, camera, radius, c0, 1.5, gamma, iterations=4, limb=False)
             c0, blur = first.c, first.blur
         fit = model_fit.fit(img, camera, radius, c0, blur, gamma, noise_levels=noise_levels)
+        for _ in range(REFITS if from_search else 0):
+            if _outline_shift(camera, radius, c0, fit.c) < REFIT_PX:
+                break
+            c0 = fit.c
+            fit = model_fit.fit(img, camera, radius, c0, fit.blur, gamma)
         covered = fit.coverage()
         flips = fit.polarity_flips()
         limb = fit.limb_variation()
@@ -266,6 +298,12 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
         _check_arc(det.edge_points, camera.to_pixels(det.position[:2] / det.position[2]))
     det.extra.update(psf_sigma=sigma, edge_fraction=fraction)
     return det
+
+
+def _outline_shift(camera, R, a, b):
+    """Return how far sphere b's outline lies from sphere a's, px: centre or radius, the more."""
+    return max(np.linalg.norm(camera.project(a) - camera.project(b)),
+               abs(camera.apparent_radius(a, R) - camera.apparent_radius(b, R)))
 
 
 def _conic(xy, ideal, camera, radius, weights, c0):
