@@ -31,9 +31,10 @@ taken at t - s^2 kappa / 2: a blurred curved step appears that much inside the o
 curvature). The t^1.5 term is cos(i)'s next one: on a circle of radius 1 / kappa, cos^2(i) =
 2 kappa t - kappa^2 t^2, so cos(i) = sqrt(2 kappa t) (1 - kappa t / 4 - ...). Left unblurred it
 moved the outline of a frontally lit 19 px ball over a darker background by a tenth of a pixel
-at a blur of 1 px (0.46 % of the range, 0.12 % with it; noise-free renders). Known limit: where the terminator crosses the limb
-the shading is clamped (max(0, n.l)) and this model misreads it (benchmarks/vision.py measures
-it).
+at a blur of 1 px (0.46 % of the range, 0.12 % with it; noise-free renders). Known limits:
+where the terminator crosses the limb the shading is clamped (max(0, n.l)) and this model
+misreads it; a lens's defocus is a disc, not the Gaussian assumed (benchmarks/vision.py measures
+both).
 
 Geometry. The outline is the cone of rays touching the sphere, q(u) = (r.c)^2 - (c.c - R^2) r.r = 0
 for the ray r = K^-1 (u, 1) of an ideal (undistorted) pixel u (C1 of robotenis_vision.conic). A
