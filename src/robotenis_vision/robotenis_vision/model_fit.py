@@ -294,12 +294,13 @@ def columns(geo, ann, s):
     X = np.stack([1 - Phi, s * (phi - tau * (1 - Phi)), Phi, k * ramp + geo.sin_deep], axis=1)
     dX_dt = np.stack([-phi / s, -(1 - Phi), phi / s, k * Phi], axis=1)
     dX_ds = np.stack([phi * tau / s, phi, -phi * tau / s, k * phi], axis=1)
+    # cos(i) near the limb: sqrt(w2' t) (1 + k3 t), k3 = -kappa / 4; both powers blurred
     g, dg = power_edge(tau, 0.5)
     g3, dg3 = power_edge(tau, 1.5)
-    root, k = np.sqrt(geo.w2_slope), -0.25 * geo.kappa
-    h = root * (np.sqrt(s) * g + k * s ** 1.5 * g3) + geo.cos_deep
-    dh_dt = root * (dg / np.sqrt(s) + k * np.sqrt(s) * dg3)
-    dh_ds = root * ((0.5 * g - tau * dg) / np.sqrt(s) + k * np.sqrt(s) * (1.5 * g3 - tau * dg3))
+    root, k3 = np.sqrt(geo.w2_slope), -0.25 * geo.kappa
+    h = root * (np.sqrt(s) * g + k3 * s ** 1.5 * g3) + geo.cos_deep
+    dh_dt = root * (dg / np.sqrt(s) + k3 * np.sqrt(s) * dg3)
+    dh_ds = root * ((0.5 * g - tau * dg) / np.sqrt(s) + k3 * np.sqrt(s) * (1.5 * g3 - tau * dg3))
     a = ann.along[:, None]
     X, dX_dt, dX_ds = (np.hstack([m, m * a]) for m in (X, dX_dt, dX_ds))
     fourier = np.stack([np.ones(len(t)), np.cos(ann.angle), np.sin(ann.angle)], axis=1)
