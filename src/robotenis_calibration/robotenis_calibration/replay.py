@@ -1,9 +1,12 @@
 """
-`./robotenis replay BAG_DIR [--rate R] [--delay S]`: publish a recorded session, timed as recorded.
+`./robotenis replay BAG_DIR [--rate R] [--delay S] [--wait-for TOPIC]`: publish a recorded session.
 
 Every topic of the bag whose message type is installed is published as the stored CDR bytes (so
 the messages keep their header stamps) by a publisher of that type, at the recorded times divided
-by ``rate``, after ``delay`` seconds for the subscribers to discover the publishers. QoS:
+by ``rate``, after ``delay`` seconds for the subscribers to discover the publishers, and then,
+for each ``--wait-for`` topic, until a subscriber has matched it (at most WAIT_FOR_TIMEOUT: on a
+loaded machine discovery can take longer than any fixed delay, and what a reliable publisher
+sends before the match is lost). QoS:
 /robot_description latched (transient local, depth 1), images (sensor_msgs Image and
 CompressedImage) the sensor-data profile, every other topic reliable with depth 100. A truncated
 bag is replayed as far as it is whole (in file order). The topics are published under their names
@@ -25,6 +28,7 @@ from robotenis_calibration import bag_io
 LATCHED = ('robot_description',)
 IMAGE_TYPES = ('sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage')
 ACK_TIMEOUT = Duration(seconds=5)   # for reliable subscribers to receive the last messages
+WAIT_FOR_TIMEOUT = 60.0             # s: for a --wait-for topic's first subscriber
 
 
 def message_class(type_name):
@@ -66,6 +70,15 @@ def wait(executor, until):
         executor.spin_once(timeout_sec=min(left, 0.1))
 
 
+def wait_for_subscribers(executor, publishers, topics, until):
+    """Spin until each of ``topics`` has a matched subscriber or ``until``; return the others."""
+    missing = list(topics)
+    while missing and time.monotonic() < until:
+        executor.spin_once(timeout_sec=0.05)
+        missing = [t for t in missing if publishers[t].get_subscription_count() == 0]
+    return missing
+
+
 def play(reader, publishers, executor, rate):
     """Publish the bag's messages at recorded times / rate; progress on stderr about every 1 s."""
     total = sum(reader.counts[t] for t in publishers)
@@ -90,6 +103,9 @@ def main(argv=None):
     parser.add_argument('--delay', type=float, default=1.0,
                         help='s to wait before the first message (default 1)')
     parser.add_argument('--namespace', default='', help='publish the topics in this namespace')
+    parser.add_argument('--wait-for', action='append', default=[], metavar='TOPIC',
+                        help="then wait until the bag's TOPIC has a subscriber (repeatable; at "
+                             f'most {WAIT_FOR_TIMEOUT:.0f} s)')
     args = parser.parse_args(argv)
     if not args.rate > 0:
         parser.error(f'--rate must be positive, got {args.rate}')
@@ -106,7 +122,18 @@ def main(argv=None):
     executor.add_node(node)
     try:
         publishers = create_publishers(node, reader.topics)
+        unknown = [t for t in args.wait_for if t not in publishers]
+        if unknown:
+            print(f"robotenis replay: --wait-for {', '.join(unknown)}: not replayed (the bag's "
+                  f"topics of installed types: {', '.join(publishers)})", file=sys.stderr)
+            return 2
         wait(executor, time.monotonic() + args.delay)
+        missing = wait_for_subscribers(executor, publishers, args.wait_for,
+                                       time.monotonic() + WAIT_FOR_TIMEOUT)
+        if missing:
+            print(f"robotenis replay: no subscriber on {', '.join(missing)} after "
+                  f'{WAIT_FOR_TIMEOUT:.0f} s; nothing published', file=sys.stderr)
+            return 1
         play(reader, publishers, executor, args.rate)
         for pub in publishers.values():
             if pub.qos_profile.reliability == ReliabilityPolicy.RELIABLE:

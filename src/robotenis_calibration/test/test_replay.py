@@ -61,8 +61,10 @@ def test_replay_publishes_the_bag(tmp_path, probe, console_script):
     node.create_subscription(CompressedImage, '/camera/image_raw/compressed', images.append,
                              qos_profile_sensor_data)
     log = open(tmp_path / 'replay.log', 'w')
+    # waits for the probe's subscription: a fixed delay lost the first messages once in CI
     proc = subprocess.Popen([console_script('replay'), bag.path, '--rate', str(RATE),
-                             '--delay', '2'], env=env, stdout=log, stderr=subprocess.STDOUT)
+                             '--delay', '0.5', '--wait-for', '/sphere/position'], env=env,
+                            stdout=log, stderr=subprocess.STDOUT)
     spin_while(executor, proc, 60.0)
     log.close()
     assert proc.returncode == 0, (tmp_path / 'replay.log').read_text()
@@ -84,3 +86,13 @@ def test_replay_stops_cleanly_on_ctrl_c(tmp_path, probe, console_script):
     out = proc.communicate(timeout=10)[0]
     assert proc.returncode == 0, out
     assert 'interrupted' in out and 'Traceback' not in out
+
+
+def test_waiting_for_a_topic_the_bag_does_not_replay_is_refused_at_once(tmp_path, probe,
+                                                                        console_script):
+    _, _, env = probe
+    bag = bag_sim.write(tmp_path / 'bag', bag_sim.BagSpec(poses=2))
+    done = subprocess.run([console_script('replay'), bag.path, '--wait-for', '/no/such/topic'],
+                          env=env, capture_output=True, text=True, timeout=30)
+    assert done.returncode == 2
+    assert '/no/such/topic: not replayed' in done.stderr and '/sphere/position' in done.stderr
