@@ -220,15 +220,18 @@ def _on_ball(camera, a, b, R):
     highlight, its terminator, a shading feature), measured as a ball a few times too far; not
     a ball of its own. One that reaches out of the disc may be a ball beside it, whole.
     """
-    ra, rb = camera.apparent_radius(a, R), camera.apparent_radius(b, R)
-    return (rb >= 1.5 * ra
-            and np.linalg.norm(camera.project(a) - camera.project(b)) + ra <= 1.1 * rb)
+    return _within(camera.project(a), camera.apparent_radius(a, R),
+                   camera.project(b), camera.apparent_radius(b, R))
 
 
 def _inside(small, big):
     """Return whether candidate ``small`` lies within the disc of a candidate 1.5x its size."""
-    return (big.radius >= 1.5 * small.radius
-            and np.linalg.norm(small.centre - big.centre) + small.radius <= 1.1 * big.radius)
+    return _within(small.centre, small.radius, big.centre, big.radius)
+
+
+def _within(centre_a, ra, centre_b, rb):
+    """Return whether disc a (px) lies within disc b, to 1.1 of its radius, b 1.5x a's size."""
+    return rb >= 1.5 * ra and np.linalg.norm(centre_a - centre_b) + ra <= 1.1 * rb
 
 
 def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
@@ -261,7 +264,7 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
             c0, blur = first.c, first.blur
         fit = model_fit.fit(img, camera, radius, c0, blur, gamma, noise_levels=noise_levels)
         for _ in range(REFITS if from_search else 0):
-            if _outline_shift(camera, radius, c0, fit.c) < REFIT_PX:
+            if max(model_fit.outline_offset(camera, radius, c0, fit.c)) < REFIT_PX:
                 break
             c0 = fit.c
             fit = model_fit.fit(img, camera, radius, c0, fit.blur, gamma)
@@ -298,12 +301,6 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
         _check_arc(det.edge_points, camera.to_pixels(det.position[:2] / det.position[2]))
     det.extra.update(psf_sigma=sigma, edge_fraction=fraction)
     return det
-
-
-def _outline_shift(camera, R, a, b):
-    """Return how far sphere b's outline lies from sphere a's, px: centre or radius, the more."""
-    return max(np.linalg.norm(camera.project(a) - camera.project(b)),
-               abs(camera.apparent_radius(a, R) - camera.apparent_radius(b, R)))
 
 
 def _conic(xy, ideal, camera, radius, weights, c0):

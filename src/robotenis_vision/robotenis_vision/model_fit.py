@@ -150,6 +150,12 @@ class Annulus:
     usable: np.ndarray       # (n,) not saturated
 
 
+def outline_offset(camera, R, a, b):
+    """Return how far sphere b's outline lies from sphere a's: its centre and its radius, px."""
+    return (float(np.linalg.norm(camera.project(b) - camera.project(a))),
+            abs(camera.apparent_radius(b, R) - camera.apparent_radius(a, R)))
+
+
 def outline_conic(camera, c, R):
     """Return the sphere's outline as a conic in ideal pixels (3x3, positive inside)."""
     c = np.asarray(c, dtype=float)
@@ -534,8 +540,7 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
     if not np.all(np.isfinite(c)) or c[2] <= R:
         raise DetectionError('the model fit did not converge')
     # the outline must have stayed within the annulus it was fitted on
-    moved = np.linalg.norm(camera.project(c) - camera.project(c0))
-    grown = abs(camera.apparent_radius(c, R) - r_px)
+    moved, grown = outline_offset(camera, R, c0, c)
     if moved > outer or grown > outer:
         raise DetectionError(f'the outline is not where the fit started ({moved:.1f} px off, '
                              f'radius {grown:.1f} px off)')
