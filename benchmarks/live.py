@@ -4,12 +4,16 @@ Benchmark: the live chain names what the robot hides (issue 15, part 1), and whi
 For each named effect and the effects outside the library, one session through the ROS nodes
 (``./robotenis demo``'s part 4: the simulated motors, the rendered hand camera, the detector, the
 controller and the calibration service, on simulated time) on a truth carrying it. Each line
-prints the effects the service claimed, the FK error of its result over 500 boundary poses
-against the simulated truth (as ``./robotenis fk`` applies it), and beside it the same robot
-calibrated from a static session of 300 poses measured through the noise model instead of
-images (the demo's part 3: the static floor). Targets: the effect named and nothing else (the
-generic model of its kind for an effect outside the library), error at most 0.1 mm and at most
-3x the static floor. Each session takes about 5 minutes of wall time on 2 cores.
+prints the effects the service claimed and its held-out error against the simulated truth: the
+loop's held-out error (the demo's) with each held-out rest's camera reading replaced by the
+truth's, noise-free (``live_links.holdout_truth_error_mm``); beside it the same robot calibrated
+from a static session of 300 poses measured through the noise model instead of images (the demo's
+part 3: the static floor). Targets: the effect named and nothing else (the generic model of its
+kind for an effect outside the library), held-out error at most 0.1 mm and at most 3x the static
+floor. Each line also gives both results' FK error over 500 boundary poses against the truth (as
+``./robotenis fk`` applies it): far beyond the poses where the camera sees the ball, and with the
+common offset that the fitted ball position absorbs, so it is no test of the chain but what a
+user of the whole workspace gets. Each session takes about 2 minutes of wall time on 2 cores.
 
 Beside it, per effect, the links measured apart (``live_links``), in seconds rather than minutes:
 the same number of poses measured through the noise model alone, and through rendered images
@@ -17,8 +21,7 @@ without the dynamics (each rest carries the detector's bias at its true pose, fr
 without sensor noise: ``study.static_run(images=...)``), with the ball planned within 0.55 m
 (``poses.PLAN_RANGE``) and within 0.40 m (``poses.IMAGE_MAX_RANGE``, where the calibration node
 plans); and the live bag calibrated again with each rest's detector bias taken out. Errors at
-the rests are given as RMS and less their common offset (along which the hand camera's
-incremental measurements barely pin the robot).
+the rests are given as RMS and less their common offset.
 ``--images-only`` skips the sessions through ROS.
 """
 import argparse
@@ -43,7 +46,7 @@ TARGET_MM, TARGET_RATIO = 0.1, 3.0
 
 
 def verdict(expected, claimed, live, static):
-    """MET or NOT MET with the reason."""
+    """MET or NOT MET with the reason (live, static: held-out errors against the truth, mm)."""
     if claimed != [expected]:
         return f'NOT MET (claimed {", ".join(claimed) or "nothing"})'
     if live > TARGET_MM or live > TARGET_RATIO * static:
@@ -51,13 +54,22 @@ def verdict(expected, claimed, live, static):
     return 'MET'
 
 
-def scored(label, d, session, robot):
-    """Return a line: the effects a diagnosis claimed and its FK error against the truth."""
+def errors_mm(d, meas, session, robot):
+    """Return (held-out error against the truth, FK error over the workspace), mm."""
     desc = result.calibrated_description(d, description.nominal())
+    return (live_links.holdout_truth_error_mm(d, meas, session, robot),
+            workspace_error_mm(desc, robot))
+
+
+def scored(label, d, meas, session, robot):
+    """Return a line: the effects a diagnosis claimed and its errors against the truth."""
+    desc = result.calibrated_description(d, description.nominal())
+    held_out = live_links.holdout_truth_error_mm(d, meas, session, robot)
     at, less = live_links.rest_error_mm(desc, robot, session)
     whole = workspace_error_mm(desc, robot)
-    return (f'    {label:36s} {", ".join(d.final.model.effects) or "nothing":40s} at the rests '
-            f'{at:6.3f} mm ({less:.3f} less offset), workspace {whole:6.3f} mm')
+    return (f'    {label:36s} {", ".join(d.final.model.effects) or "nothing":40s} held-out '
+            f'{held_out:6.3f} mm; FK at the rests {at:6.3f} mm ({less:.3f} less offset), '
+            f'workspace {whole:6.3f} mm')
 
 
 def links(robot, args):
@@ -68,20 +80,34 @@ def links(robot, args):
     seen = -np.asarray(robot.camera_translation, dtype=float)
     for far in (poses.PLAN_RANGE[1], poses.IMAGE_MAX_RANGE):
         for label, images in (('noise model only', None), ('images, no dynamics', 'model')):
-            session, _, d = study.static_run(robot, description.nominal(), args.poses, args.seed,
-                                             guess_error=seen, images=images, max_range=far)
-            out.append(scored(f'{label}, <= {far} m ({len(session)})', d, session, robot))
+            session, meas, d = study.static_run(robot, description.nominal(), args.poses,
+                                                args.seed, guess_error=seen, images=images,
+                                                max_range=far)
+            out.append(scored(f'{label}, <= {far} m ({len(session)})', d, meas, session, robot))
     return out
 
 
-def with_bias_out(bag, robot):
+def with_bias_out(bag, robot, seed):
     """Return a line: the live bag calibrated again with each rest's detector bias taken out."""
     session, _ = rests.load_session(bag)
     C = live_links.true_centres(robot, session.Theta, session.direction)
     bias = study.detector_bias(C, robot.geometry.sphere_radius)
     session = live_links.without_bias(session, bias)
-    d, _ = pipeline.calibrate_session(session)
-    return scored(f'live bag, detector bias out ({len(session)})', d, session, robot)
+    d, meas = pipeline.calibrate_session(session, pipeline.Settings(seed=seed))
+    return scored(f'live bag, detector bias out ({len(session)})', d, meas, session, robot)
+
+
+def recalibrated(bag, robot, seed):
+    """
+    Return a line, the claimed effects and (held-out, workspace) errors of the live bag.
+
+    Calibrated again as the service did (``pipeline.calibrate_session``, the request's seed):
+    the held-out figure needs the loop's own split, which the service's result file does not keep.
+    """
+    session, _ = rests.load_session(bag)
+    d, meas = pipeline.calibrate_session(session, pipeline.Settings(seed=seed))
+    return (scored(f'live bag as recorded ({len(session)})', d, meas, session, robot),
+            list(d.effects), errors_mm(d, meas, session, robot))
 
 
 def live_session(effect, folder, args):
@@ -118,27 +144,32 @@ def main():
             print('\n'.join(apart[-5:]), flush=True)
             if args.images_only:
                 continue
-            _, _, d = study.static_run(robot, nominal, STATIC_POSES, args.seed + 1)
-            static = workspace_error_mm(result.calibrated_description(d, nominal), robot)
+            session, meas, d = study.static_run(robot, nominal, STATIC_POSES, args.seed + 1)
+            static = errors_mm(d, meas, session, robot)
             claimed, desc, wall = live_session(effect, folder, args)
             if desc is None:
-                rows.append((effect, 'session failed', float('nan'), static, wall, 'NOT MET'))
+                rows.append((effect, 'session failed', (np.nan, np.nan), static, wall, 'NOT MET'))
                 continue
-            live = workspace_error_mm(desc, robot)
             bags = sorted(glob.glob(os.path.join(folder, effect, 'session-*')))
-            apart.append(with_bias_out(bags[-1], robot))
-            print(apart[-1], flush=True)
+            line, again, live = recalibrated(bags[-1], robot, args.seed)
+            if again != claimed:
+                line += f' (the service claimed {", ".join(claimed) or "nothing"})'
+            apart += [line, with_bias_out(bags[-1], robot, args.seed)]
+            print('\n'.join(apart[-2:]), flush=True)
             rows.append((effect, ', '.join(claimed) or 'none', live, static, wall,
-                         verdict(EXPECTED[effect], claimed, live, static)))
-    print(f'\nthe links apart: {args.poses} poses, effects claimed, FK error against the truth')
+                         verdict(EXPECTED[effect], claimed, live[0], static[0])))
+    print(f'\nthe links apart: {args.poses} poses, effects claimed, errors against the truth')
     print('\n'.join(apart))
     if args.images_only:
         return
-    print(f'\nlive sessions: {args.poses} poses, {args.frames} frames, settle {args.settle} s; FK '
-          'error over 500 boundary poses against the truth')
-    print(f'  {"hidden effect":20s} {"claimed":28s} {"live":>9s} {"static":>9s} {"wall":>6s}')
+    print(f'\nlive sessions: {args.poses} poses, {args.frames} frames, settle {args.settle} s; '
+          'held-out error against the truth (the target), and in brackets the FK error over 500 '
+          'boundary poses')
+    print(f'  {"hidden effect":20s} {"claimed":28s} {"live":>18s} {"static floor":>18s} '
+          f'{"wall":>6s}')
     for effect, claimed, live, static, wall, v in rows:
-        print(f'  {effect:20s} {claimed:28s} {live:6.3f} mm {static:6.3f} mm {wall:5.0f} s  {v}')
+        print(f'  {effect:20s} {claimed:28s} {live[0]:6.3f} ({live[1]:6.3f}) mm '
+              f'{static[0]:6.3f} ({static[1]:6.3f}) mm {wall:5.0f} s  {v}')
     failed = sum(r[-1] != 'MET' for r in rows)
     print(f'\n{failed} of {len(rows)} NOT MET' if failed else '\nall MET')
 

@@ -3,7 +3,8 @@ The `hand_camera` node: the camera on the effector, seeing the ball (robotenis_s
 
 Renders at ``rate`` (120 Hz, the paper's 8.34 ms) the ball as the camera sees it from the TRUE
 effector position (the latest sim/effector_position of sim_motors) and the truth file's camera
-mounting, and publishes camera/image_raw (sensor_msgs/Image, mono8) and camera/camera_info with
+mounting, where the truth's camera reads it (its undeclared errors: rendered_centre), and publishes
+camera/image_raw (sensor_msgs/Image, mono8) and camera/camera_info with
 sensor-data QoS, frame_id the robot description's optical frame. Each image is stamped with the
 effector sample it was rendered from (a faster camera than that topic repeats a stamp: run
 sim_motors with truth_decimation <= 8 for a fresh sample per frame). The ball is the truth's fixed
@@ -51,6 +52,18 @@ PARAMETERS = {
     'blur': (0.8, 'px: Gaussian blur of the lens'),
     'tick_on_effector': (False, 'expose on the simulator samples (visual lockstep), no timer'),
 }
+
+
+def rendered_centre(truth, P, B):
+    """
+    Return where the ball is drawn (optical frame, m) for effector P and ball B (base frame).
+
+    Where the truth's camera reads it (truth.camera_reading: a depth scale, a lens residue the
+    declared camera lacks), so that a detector that measures the image exactly reads what the
+    truth says the camera reads, and the scorers compare with the same.
+    """
+    return truth.camera_reading(camera_model.sphere_in_optical(
+        P, B, truth.camera_rotation, truth.camera_translation))
 
 
 class HandCameraNode(Node):
@@ -111,8 +124,7 @@ class HandCameraNode(Node):
             return
         P, stamp = self.effector
         B = self.ball.at(stamp_seconds(stamp))
-        C = camera_model.sphere_in_optical(P, B, self.truth.camera_rotation,
-                                           self.truth.camera_translation)
+        C = rendered_centre(self.truth, P, B)
         image = camera_model.render(self.camera, C, self.truth.geometry.sphere_radius, self.rng,
                                     blur_sigma=self.blur, noise_sigma=self.noise)
         header = Header(stamp=stamp, frame_id=self.frame_id)

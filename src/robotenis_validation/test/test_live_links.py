@@ -1,6 +1,8 @@
 """Scoring a recorded session link by link against the truth it ran with."""
+import dataclasses
+
 import numpy as np
-from robotenis_calibration import rests
+from robotenis_calibration import pipeline, rests
 from robotenis_kinematics import description
 from robotenis_sim import camera_model, scenarios, session_bag
 from robotenis_sim import truth as sim_truth
@@ -59,3 +61,21 @@ def test_taking_the_bias_out_keeps_the_rests_it_measured(tmp_path):
     assert len(out) == len(session) - 1
     np.testing.assert_array_equal(out.sphere, session.sphere[keep] - bias[keep])
     np.testing.assert_array_equal(out.Theta, session.Theta[keep])
+
+
+def test_the_held_out_error_against_the_truth_is_the_loops_own_on_exact_readings(tmp_path):
+    """holdout_truth_error_mm: the loop's held-out error when the rests read the truth exactly."""
+    effect = scenarios.EFFECTS['backlash']
+    bag = session_bag.write(tmp_path / 'bag', session_bag.BagSpec(poses=40, seed=7,
+                                                                  effects=effect))
+    truth = sim_truth.with_effects(sim_truth.load(), **effect)
+    session, _ = rests.load_session(bag.path)
+    sides = session.with_backlash(np.asarray(truth.effects['backlash'])).direction
+    read = live_links.true_sphere(truth, session.Theta, sides)
+    exact = dataclasses.replace(session, sphere=read)
+    d, meas = pipeline.calibrate_session(exact)
+    assert np.isclose(live_links.holdout_truth_error_mm(d, meas, exact, truth),
+                      d.errors_mm['final'], rtol=1e-9)
+    # as recorded, the held-out rests' own noise adds to what the truth sees
+    d, meas = pipeline.calibrate_session(session)
+    assert live_links.holdout_truth_error_mm(d, meas, session, truth) < d.errors_mm['final']
