@@ -12,13 +12,17 @@ from robotenis_vision import detector
 from scipy import stats
 
 
+def backlash_session(folder, seed):
+    """Return (rests, truth) of a simulated 40-pose bag from a robot with a backlash."""
+    effect = scenarios.EFFECTS['backlash']
+    bag = session_bag.write(folder / 'bag', session_bag.BagSpec(poses=40, seed=seed,
+                                                                effects=effect))
+    return rests.load_session(bag.path)[0], sim_truth.with_effects(sim_truth.load(), **effect)
+
+
 def test_a_simulated_bags_rests_meet_the_truth_within_their_noise(tmp_path):
     """The truth's prediction from the readings is what the bag measured, to its frames' noise."""
-    effect = scenarios.EFFECTS['backlash']
-    bag = session_bag.write(tmp_path / 'bag', session_bag.BagSpec(poses=40, seed=4,
-                                                                  effects=effect))
-    truth = sim_truth.with_effects(sim_truth.load(), **effect)
-    session, _ = rests.load_session(bag.path)
+    session, truth = backlash_session(tmp_path, 4)
     e = session.sphere - live_links.true_sphere(truth, session.Theta, session.direction)
     chi2 = float(np.einsum('ki,kij,kj->', e, np.linalg.inv(session.sphere_cov), e))
     dof = 3 * len(e)
@@ -65,11 +69,7 @@ def test_taking_the_bias_out_keeps_the_rests_it_measured(tmp_path):
 
 def test_the_held_out_error_against_the_truth_is_the_loops_own_on_exact_readings(tmp_path):
     """holdout_truth_error_mm: the loop's held-out error when the rests read the truth exactly."""
-    effect = scenarios.EFFECTS['backlash']
-    bag = session_bag.write(tmp_path / 'bag', session_bag.BagSpec(poses=40, seed=7,
-                                                                  effects=effect))
-    truth = sim_truth.with_effects(sim_truth.load(), **effect)
-    session, _ = rests.load_session(bag.path)
+    session, truth = backlash_session(tmp_path, 7)
     sides = session.with_backlash(np.asarray(truth.effects['backlash'])).direction
     read = live_links.true_sphere(truth, session.Theta, sides)
     exact = dataclasses.replace(session, sphere=read)
