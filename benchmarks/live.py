@@ -62,14 +62,13 @@ def errors_mm(d, meas, session, robot):
 
 
 def scored(label, d, meas, session, robot):
-    """Return a line: the effects a diagnosis claimed and its errors against the truth."""
+    """Return a line (the effects a diagnosis claimed, its errors) and (held-out, workspace)."""
+    held_out, whole = errors_mm(d, meas, session, robot)
     desc = result.calibrated_description(d, description.nominal())
-    held_out = live_links.holdout_truth_error_mm(d, meas, session, robot)
     at, less = live_links.rest_error_mm(desc, robot, session)
-    whole = workspace_error_mm(desc, robot)
     return (f'    {label:36s} {", ".join(d.final.model.effects) or "nothing":40s} held-out '
             f'{held_out:6.3f} mm; FK at the rests {at:6.3f} mm ({less:.3f} less offset), '
-            f'workspace {whole:6.3f} mm')
+            f'workspace {whole:6.3f} mm'), (held_out, whole)
 
 
 def links(robot, args):
@@ -83,7 +82,8 @@ def links(robot, args):
             session, meas, d = study.static_run(robot, description.nominal(), args.poses,
                                                 args.seed, guess_error=seen, images=images,
                                                 max_range=far)
-            out.append(scored(f'{label}, <= {far} m ({len(session)})', d, meas, session, robot))
+            out.append(scored(f'{label}, <= {far} m ({len(session)})', d, meas, session,
+                              robot)[0])
     return out
 
 
@@ -94,7 +94,7 @@ def with_bias_out(bag, robot, seed):
     bias = study.detector_bias(C, robot.geometry.sphere_radius)
     session = live_links.without_bias(session, bias)
     d, meas = pipeline.calibrate_session(session, pipeline.Settings(seed=seed))
-    return scored(f'live bag, detector bias out ({len(session)})', d, meas, session, robot)
+    return scored(f'live bag, detector bias out ({len(session)})', d, meas, session, robot)[0]
 
 
 def recalibrated(bag, robot, seed):
@@ -106,8 +106,8 @@ def recalibrated(bag, robot, seed):
     """
     session, _ = rests.load_session(bag)
     d, meas = pipeline.calibrate_session(session, pipeline.Settings(seed=seed))
-    return (scored(f'live bag as recorded ({len(session)})', d, meas, session, robot),
-            list(d.effects), errors_mm(d, meas, session, robot))
+    line, errors = scored(f'live bag as recorded ({len(session)})', d, meas, session, robot)
+    return line, list(d.effects), errors
 
 
 def live_session(effect, folder, args):
