@@ -32,7 +32,7 @@ import time
 from types import SimpleNamespace
 
 import numpy as np
-from robotenis_calibration import pipeline, poses, rests, result
+from robotenis_calibration import pipeline, poses, result
 from robotenis_kinematics import description
 from robotenis_sim import scenarios
 from robotenis_sim import truth as sim_truth
@@ -54,17 +54,11 @@ def verdict(expected, claimed, live, static):
     return 'MET'
 
 
-def errors_mm(d, meas, session, robot):
-    """Return (held-out error against the truth, FK error over the workspace), mm."""
-    desc = result.calibrated_description(d, description.nominal())
-    return (live_links.holdout_truth_error_mm(d, meas, session, robot),
-            workspace_error_mm(desc, robot))
-
-
 def scored(label, d, meas, session, robot):
     """Return a line (the effects a diagnosis claimed, its errors) and (held-out, workspace)."""
-    held_out, whole = errors_mm(d, meas, session, robot)
     desc = result.calibrated_description(d, description.nominal())
+    held_out = live_links.holdout_truth_error_mm(d, meas, session, robot)
+    whole = workspace_error_mm(desc, robot)
     at, less = live_links.rest_error_mm(desc, robot, session)
     return (f'    {label:36s} {", ".join(d.final.model.effects) or "nothing":40s} held-out '
             f'{held_out:6.3f} mm; FK at the rests {at:6.3f} mm ({less:.3f} less offset), '
@@ -87,27 +81,22 @@ def links(robot, args):
     return out
 
 
-def with_bias_out(bag, robot, seed):
-    """Return a line: the live bag calibrated again with each rest's detector bias taken out."""
-    session, _ = rests.load_session(bag)
-    C = live_links.true_centres(robot, session.Theta, session.direction)
-    bias = study.detector_bias(C, robot.geometry.sphere_radius)
-    session = live_links.without_bias(session, bias)
-    d, meas = pipeline.calibrate_session(session, pipeline.Settings(seed=seed))
-    return scored(f'live bag, detector bias out ({len(session)})', d, meas, session, robot)[0]
-
-
-def recalibrated(bag, robot, seed):
+def live_bag(bag, robot, seed):
     """
-    Return a line, the claimed effects and (held-out, workspace) errors of the live bag.
+    Return lines and the claimed effects and (held-out, workspace) errors of a live bag.
 
-    Calibrated again as the service did (``pipeline.calibrate_session``, the request's seed):
-    the held-out figure needs the loop's own split, which the service's result file does not keep.
+    Calibrated again as the service did, as recorded and with each rest's detector bias taken out
+    (the ball rendered without noise at its true pose: what an unbiased detector would give).
     """
-    session, _ = rests.load_session(bag)
-    d, meas = pipeline.calibrate_session(session, pipeline.Settings(seed=seed))
+    session, d, meas = live_links.calibrated_as_the_service(bag, seed)
     line, errors = scored(f'live bag as recorded ({len(session)})', d, meas, session, robot)
-    return line, list(d.effects), errors
+    C = live_links.true_centres(robot, session.Theta, session.direction)
+    unbiased = live_links.without_bias(session, study.detector_bias(
+        C, robot.geometry.sphere_radius))
+    d_out, meas_out = pipeline.calibrate_session(unbiased, pipeline.Settings(seed=seed))
+    out = scored(f'live bag, detector bias out ({len(unbiased)})', d_out, meas_out, unbiased,
+                 robot)[0]
+    return [line, out], list(d.effects), errors
 
 
 def live_session(effect, folder, args):
@@ -145,16 +134,16 @@ def main():
             if args.images_only:
                 continue
             session, meas, d = study.static_run(robot, nominal, STATIC_POSES, args.seed + 1)
-            static = errors_mm(d, meas, session, robot)
+            static = scored('static', d, meas, session, robot)[1]
             claimed, desc, wall = live_session(effect, folder, args)
             if desc is None:
                 rows.append((effect, 'session failed', (np.nan, np.nan), static, wall, 'NOT MET'))
                 continue
             bags = sorted(glob.glob(os.path.join(folder, effect, 'session-*')))
-            line, again, live = recalibrated(bags[-1], robot, args.seed)
+            lines, again, live = live_bag(bags[-1], robot, args.seed)
             if again != claimed:
-                line += f' (the service claimed {", ".join(claimed) or "nothing"})'
-            apart += [line, with_bias_out(bags[-1], robot, args.seed)]
+                lines[0] += f' (the service claimed {", ".join(claimed) or "nothing"})'
+            apart += lines
             print('\n'.join(apart[-2:]), flush=True)
             rows.append((effect, ', '.join(claimed) or 'none', live, static, wall,
                          verdict(EXPECTED[effect], claimed, live[0], static[0])))

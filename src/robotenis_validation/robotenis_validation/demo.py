@@ -34,7 +34,7 @@ from types import SimpleNamespace
 import numpy as np
 from robotenis_bringup import launch_file
 from robotenis_bringup.launcher import Launcher
-from robotenis_calibration import pipeline, rests, result, service_client
+from robotenis_calibration import result, service_client
 from robotenis_kinematics import delta, description, observability, synthetic
 from robotenis_kinematics import identification as idf
 from robotenis_sim import scenarios, truth as sim_truth
@@ -169,8 +169,7 @@ def against_the_truth(args):
     """Part 3's answer scored against the simulator's truth: lines of text."""
     bag = sorted(glob.glob(os.path.join(args.out, 'session-*')))[-1]
     robot = sim_truth.load(os.path.join(args.out, 'truth.yaml'))
-    session, _ = rests.load_session(bag)
-    d, meas = pipeline.calibrate_session(session, pipeline.Settings(seed=args.seed))
+    session, d, meas = live_links.calibrated_as_the_service(bag, args.seed)
     plain, final = (live_links.holdout_truth_error_mm(d, meas, session, robot, r.model)
                     for r in (d.plain, d.final))
     nominal = description.nominal()

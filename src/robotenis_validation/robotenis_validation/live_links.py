@@ -108,6 +108,18 @@ def holdout_truth_error_mm(d, meas, session, truth, model=None):
     return float(np.sqrt(np.mean(diagnosis.position_errors(model, seen) ** 2)) * 1e3)
 
 
+def calibrated_as_the_service(bag, seed):
+    """
+    Return (session, diagnosis, measurements) of a session bag calibrated as the service does.
+
+    ``pipeline.calibrate_session`` with the request's ``seed``: the held-out figures need the
+    loop's own split, which the service's result file does not keep.
+    """
+    session, _ = rests.load_session(bag)
+    d, meas = pipeline.calibrate_session(session, pipeline.Settings(seed=seed))
+    return session, d, meas
+
+
 def without_bias(session, bias):
     """Return the session with each rest's detector bias (K, 3) taken out (NaN rows dropped)."""
     ok = np.flatnonzero(np.all(np.isfinite(bias), axis=1))
