@@ -78,12 +78,23 @@ def test_replay_publishes_the_bag(tmp_path, probe, console_script):
 def test_replay_stops_cleanly_on_ctrl_c(tmp_path, probe, console_script):
     _, _, env = probe
     bag = bag_sim.write(tmp_path / 'bag', bag_sim.BagSpec(poses=10))
-    proc = subprocess.Popen([console_script('replay'), bag.path, '--delay', '0.5'], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    time.sleep(3.0)
-    assert proc.poll() is None, proc.communicate()[0]
+    log_path = tmp_path / 'replay.log'
+    with open(log_path, 'w') as log:
+        proc = subprocess.Popen([console_script('replay'), bag.path, '--delay', '0.5'],
+                                env=env, stdout=log, stderr=subprocess.STDOUT)
+    # interrupted while it publishes (a fixed sleep hit the imports on a loaded machine)
+    deadline = time.monotonic() + 60.0
+    while 'of the bag' not in log_path.read_text() and time.monotonic() < deadline:
+        assert proc.poll() is None, log_path.read_text()
+        time.sleep(0.05)
+    time.sleep(0.5)
     proc.send_signal(signal.SIGINT)
-    out = proc.communicate(timeout=10)[0]
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+    out = log_path.read_text()
     assert proc.returncode == 0, out
     assert 'interrupted' in out and 'Traceback' not in out
 
