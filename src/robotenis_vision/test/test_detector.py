@@ -87,6 +87,78 @@ def test_a_prior_from_the_last_frame_gives_the_same_centre(c):
         assert abs(along) < tol_along and across < tol_across
 
 
+def septic(u):
+    """Return the 4-5-6-7 polynomial of a point-to-point move at u in [0, 1]."""
+    return 35 * u ** 4 - 84 * u ** 5 + 70 * u ** 6 - 20 * u ** 7
+
+
+def test_a_moving_ball_is_followed_by_its_prior_moved_at_its_velocity():
+    """
+    Follow a ball on a 4-5-6-7 move at 120 frames/s, as the node's stream does.
+
+    The move (60, 40, 40 mm in 0.4 s from 0.25 m, up to 6 px a frame) takes the outline out of the
+    reach of a prior left where it was; moved at the velocity of the two last detections, each
+    frame's prior finds it without a search (search=False raises otherwise), within the
+    resolution.
+    """
+    c0, move = np.array([-0.03, -0.02, 0.25]), np.array([0.06, 0.04, 0.04])
+    duration, dt = 0.4, 1 / 120
+    times = np.arange(0.0, duration + dt / 2, dt)
+    track, left_behind = [], 0
+    for t in times:
+        c = c0 + move * septic(t / duration)
+        image = simple_render.render(CAM, c, R)
+        if len(track) < 2:
+            det = detector.detect(image, CAM, R, 'conic')
+        else:
+            try:
+                detector.detect(image, CAM, R, 'conic', track[-1][1], search=False)
+            except DetectionError:
+                left_behind += 1
+            det = detector.detect(image, CAM, R, 'conic',
+                                  detector.moved_prior(CAM, track[-2:], t), search=False)
+        along, across = split(det.position - c, c)
+        tol_along, tol_across = tolerances(c)
+        assert abs(along) < tol_along and across < tol_across, t
+        track.append((t, det))
+    assert left_behind > len(times) / 2
+
+
+def test_a_ball_that_left_its_priors_outline_is_found_near_it_without_a_search(monkeypatch):
+    """Prior 8 px off (a frame or more missed): found from there (_near), not by find()."""
+    c = POSITIONS[2]
+    prior = detector.detect(simple_render.render(CAM, c, R), CAM, R, 'conic')
+    off = detector.Detection(c + np.array([6.4, 4.8, 0.0]) * c[2] / CAM.fx, prior.covariance,
+                             prior.edge_points, 0.0, 'conic', dict(prior.extra))
+    image = simple_render.render(CAM, c, R)
+    with pytest.raises(DetectionError):
+        detector.detect(image, CAM, R, 'conic', off, search=False)
+
+    def no_search(*args):
+        raise AssertionError('the whole image was searched')
+    monkeypatch.setattr(detector, 'find', no_search)
+    along, across = split(detector.detect(image, CAM, R, 'conic', off).position - c, c)
+    tol_along, tol_across = tolerances(c)
+    assert abs(along) < tol_along and across < tol_across
+
+
+def test_a_prior_is_moved_only_by_a_recent_velocity_of_a_visible_move():
+    c = POSITIONS[2]
+    det = detector.detect(simple_render.render(CAM, c, R), CAM, R, 'conic')
+    step = np.array([2.0, 0.0, 0.0]) * c[2] / CAM.fx     # 2 px a frame
+    before = detector.Detection(det.position - step, det.covariance, det.edge_points, 0.0,
+                                'conic', dict(det.extra))
+    moved = detector.moved_prior(CAM, ((0.0, before), (0.01, det)), 0.02)
+    np.testing.assert_allclose(moved.position, det.position + step, atol=1e-12)
+    assert moved.extra == det.extra
+    tiny = detector.Detection(det.position - step / 10, det.covariance, det.edge_points, 0.0,
+                              'conic', {})
+    for track, t in ((((0.0, before), (0.01, det)), 0.01 + 2 * detector.TRACK_GAP),
+                     (((0.0, before), (2 * detector.TRACK_GAP, det)), 0.11),
+                     (((0.0, tiny), (0.01, det)), 0.02)):
+        assert detector.moved_prior(CAM, track, t) is det
+
+
 def test_a_previous_frames_noise_levels_settle_the_weights_to_the_same_centre():
     """
     At rest the model fit starts from the frame before's noise levels (the node's stream).
