@@ -140,15 +140,19 @@ def moved_prior(camera, track, t):
     """
     Return the last detection of ``track`` moved to image time ``t`` at the ball's velocity.
 
-    ``track``: the two last detections of consecutive processed frames, ((t0, det0), (t1, det1)),
-    times in s. The prior's profiles find the outline within about a pixel of where the prior
-    puts it: a ball moving 2 px between frames failed, and each such frame searched the whole
-    image (25-35 times the cost). Moved at constant velocity, a prior is off by the acceleration
-    only, a (t - t1)^2. det1 is returned as it is when either gap exceeds TRACK_GAP (the velocity
-    is out of date) or the move it predicts is under TRACK_MIN_SHIFT px (a ball at rest keeps its
-    prior: the noise of two detections does not move it).
+    ``track``: the last detections of consecutive processed frames, ((t0, det0), (t1, det1)) or
+    ((t1, det1),), times in s. The prior's profiles find the outline within about a pixel of
+    where the prior puts it: a ball moving 2 px between frames failed, and each such frame
+    searched the whole image (25-35 times the cost). Moved at constant velocity, a prior is off
+    by the acceleration only, a (t - t1)^2. det1 is returned as it is without a det0, when either
+    gap exceeds TRACK_GAP (the velocity is out of date) or when the move it predicts is under
+    TRACK_MIN_SHIFT px (a ball at rest keeps its prior: the noise of two detections does not move
+    it).
     """
-    (t0, det0), (t1, det1) = track
+    t1, det1 = track[-1]
+    if len(track) < 2:
+        return det1
+    t0, det0 = track[-2]
     if not (0 < t1 - t0 <= TRACK_GAP and 0 < t - t1 <= TRACK_GAP):
         return det1
     c = det1.position + (det1.position - det0.position) * (t - t1) / (t1 - t0)

@@ -91,8 +91,7 @@ class SphereDetectorNode(Node):
         self.frames = max(1, int(p['frames']))
         self.max_rms = float(p['max_fit_rms_px'])
         self.use_prior = bool(p['use_prior'])
-        self.prior = None               # (image time, Detection) of the last frame measured
-        self.before = None              # the one before it: with it, the ball's velocity
+        self.track = ()                 # (image time, Detection) of the last one or two frames
         self.search_interval = float(p['search_interval'])
         if not self.search_interval >= 0:
             raise ValueError(f'search_interval must not be negative, got {self.search_interval}')
@@ -127,14 +126,10 @@ class SphereDetectorNode(Node):
             self.drop('no camera_info received yet')
             return
         t = stamp_seconds(msg.header.stamp)
-        prior, self.prior = self.prior, None
-        before, self.before = self.before, None
-        if prior is None and self.next_search - self.search_interval <= t < self.next_search:
+        track, self.track = self.track, ()
+        if not track and self.next_search - self.search_interval <= t < self.next_search:
             return                      # the ball was lost (the reason logged)
-        seed = None
-        if prior is not None:
-            seed = prior[1] if before is None else detector.moved_prior(self.camera,
-                                                                        (before, prior), t)
+        seed = detector.moved_prior(self.camera, track, t) if track else None
         try:
             image = image_array(msg)
             det = detector.detect(image, self.camera, self.radius, self.method, seed,
@@ -146,7 +141,7 @@ class SphereDetectorNode(Node):
             self.next_search = t + self.search_interval
             return
         if self.use_prior and det.method != 'baseline':
-            self.before, self.prior = prior, (t, det)
+            self.track = track[-1:] + ((t, det),)
         if self.rest:
             det, failure = self.rest.update(image, det, self.camera.project(det.position))
             if failure:

@@ -155,7 +155,8 @@ def test_a_prior_is_moved_only_by_a_recent_velocity_of_a_visible_move():
                               'conic', {})
     for track, t in ((((0.0, before), (0.01, det)), 0.01 + 2 * detector.TRACK_GAP),
                      (((0.0, before), (2 * detector.TRACK_GAP, det)), 0.11),
-                     (((0.0, tiny), (0.01, det)), 0.02)):
+                     (((0.0, tiny), (0.01, det)), 0.02),
+                     (((0.01, det),), 0.02)):
         assert detector.moved_prior(CAM, track, t) is det
 
 
