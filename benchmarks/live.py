@@ -54,12 +54,16 @@ def verdict(expected, claimed, live, static):
     return 'MET'
 
 
-def scored(label, d, meas, session, robot):
-    """Return a line (the effects a diagnosis claimed, its errors) and (held-out, workspace)."""
+def scored(label, d, meas, session, robot, sides):
+    """
+    Return a line (the effects a diagnosis claimed, its errors) and (held-out, workspace).
+
+    ``sides`` (K, 3): the truth's backlash sides at the session's rests.
+    """
     desc = result.calibrated_description(d, description.nominal())
-    held_out = live_links.holdout_truth_error_mm(d, meas, session, robot)
+    held_out = live_links.holdout_truth_error_mm(d, meas, session, robot, sides=sides)
     whole = workspace_error_mm(desc, robot)
-    at, less = live_links.rest_error_mm(desc, robot, session)
+    at, less = live_links.rest_error_mm(desc, robot, session.Theta, meas.direction, sides)
     return (f'    {label:36s} {", ".join(d.final.model.effects) or "nothing":40s} held-out '
             f'{held_out:6.3f} mm; FK at the rests {at:6.3f} mm ({less:.3f} less offset), '
             f'workspace {whole:6.3f} mm'), (held_out, whole)
@@ -77,7 +81,7 @@ def links(robot, args):
                                                 args.seed, guess_error=seen, images=images,
                                                 max_range=far)
             out.append(scored(f'{label}, <= {far} m ({len(session)})', d, meas, session,
-                              robot)[0])
+                              robot, session.direction)[0])
     return out
 
 
@@ -89,13 +93,16 @@ def live_bag(bag, robot, seed):
     (the ball rendered without noise at its true pose: what an unbiased detector would give).
     """
     session, d, meas = live_links.calibrated_as_the_service(bag, seed)
-    line, errors = scored(f'live bag as recorded ({len(session)})', d, meas, session, robot)
-    C = live_links.true_centres(robot, session.Theta, session.direction)
+    true_sides = live_links.TrueSides.of_bag(bag, robot)
+    sides = true_sides.at(session.stamps)
+    line, errors = scored(f'live bag as recorded ({len(session)})', d, meas, session, robot,
+                          sides)
+    C = live_links.true_centres(robot, session.Theta, sides)
     unbiased = live_links.without_bias(session, study.detector_bias(
         C, robot.geometry.sphere_radius))
     d_out, meas_out = pipeline.calibrate_session(unbiased, pipeline.Settings(seed=seed))
     out = scored(f'live bag, detector bias out ({len(unbiased)})', d_out, meas_out, unbiased,
-                 robot)[0]
+                 robot, true_sides.at(unbiased.stamps))[0]
     return [line, out], list(d.effects), errors
 
 
@@ -134,7 +141,7 @@ def main():
             if args.images_only:
                 continue
             session, meas, d = study.static_run(robot, nominal, STATIC_POSES, args.seed + 1)
-            static = scored('static', d, meas, session, robot)[1]
+            static = scored('static', d, meas, session, robot, session.direction)[1]
             claimed, desc, wall = live_session(effect, folder, args)
             if desc is None:
                 rows.append((effect, 'session failed', (np.nan, np.nan), static, wall, 'NOT MET'))

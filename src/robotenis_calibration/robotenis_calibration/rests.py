@@ -456,34 +456,36 @@ def known_gate(x, cov, alpha):
     return keep
 
 
-# rad: a joint this far from its rest value was moving toward it (5 counts and the noise)
-MOVED = 2e-4
-GAPS = MOVED * 1.25 ** np.arange(20)     # rad: reversals a side may need, 0.2 to 14 mrad
+MOVED = 2e-4    # rad: the smallest gap tried (5 counts of the resolvers and their noise)
+GAPS = MOVED * 1.25 ** np.arange(20)     # rad: gaps a side may be taken at, 0.2 to 14 mrad
 # the sides before any backlash is known: a reversal shorter than a coarse gear's backlash (about
 # 10 arcmin) is taken for a controller's overshoot, which leaves the contact where it was
 START_GAP = int(nearest_gap(GAPS, 3e-3)[0])
 
 
-def approach_directions(t_joint, Theta, t0, rest, previous, since=-np.inf, gaps=GAPS):
+def approach_directions(t_joint, Theta, t0, previous, since=-np.inf, gaps=GAPS):
     """
-    Return the sign of each joint's motion into the rest that starts at t0, per gap (G, 3).
+    Return each joint's backlash contact side at the rest that starts at t0, per gap (G, 3).
 
-    With mean readings ``rest`` (3,): from the last reading in [since, t0) farther than the gap
-    from it (a backlash's contact side changes only when the motor comes back by more than its
-    width); a joint that did not move that far keeps ``previous`` (G, 3), the signs of the rest
-    before, which started at ``since``. The joint states show the motion through every pose
-    visited, measured or not.
+    A backlash of width g is a play (hysteresis) between motor and arm: the contact changes side
+    only when the motor, which the resolvers read, travels back across the whole gap. So the side
+    is that of the last stretch of readings in [since, t0) that spans g: +1 if it rose from its
+    lowest reading, -1 if it fell from its highest, whatever the rest's own value (a reversal
+    across the gap may straddle it). A joint whose readings since then span less than g keeps
+    ``previous`` (G, 3), the sides of the rest before, which started at ``since``. The joint
+    states show the motion through every pose visited, measured or not.
     """
     before = Theta[np.searchsorted(t_joint, since):np.searchsorted(t_joint, t0)]
     out = np.array(previous, dtype=float)
     for j in range(3):
-        dist = np.abs(before[:, j] - rest[j])
-        # the farthest distance from here on: the last reading beyond g is the last index where
-        # that running maximum exceeds g
-        reach = np.maximum.accumulate(dist[::-1])[::-1]
-        last = np.searchsorted(-reach, -np.asarray(gaps), side='left') - 1
-        moved = last >= 0
-        out[moved, j] = np.sign(rest[j] - before[last[moved], j])
+        x = before[:, j]
+        # the span of the readings from each one on shrinks with time: the last stretch that
+        # spans g starts at the last index where that span is still at least g
+        highest = np.maximum.accumulate(x[::-1])[::-1]
+        span = highest - np.minimum.accumulate(x[::-1])[::-1]
+        last = np.searchsorted(-span, -np.asarray(gaps), side='right') - 1
+        crossed = last >= 0
+        out[crossed, j] = np.where(x[last[crossed]] >= highest[last[crossed]], -1.0, 1.0)
     return out
 
 
@@ -521,7 +523,7 @@ def average(rec, windows, params, notes):
             continue
         rejected, total = rejected + len(keep) - n, total + len(keep)
         th = readings[k][keep_T].mean(axis=0)
-        direction = approach_directions(rec.t_joint, rec.Theta, t0, th, direction, since)
+        direction = approach_directions(rec.t_joint, rec.Theta, t0, direction, since)
         since = t0
         rows.append((th, np.sqrt(np.diag(joint_cov[k]) / n_T), spheres[k][keep].mean(axis=0),
                      camera_cov[k] / n, 0.5 * (t0 + t1), n, direction))

@@ -36,8 +36,9 @@ class Session:
         it (poses visited but not measured lie between rests); by default from the order of Theta.
     noise : the frames' and readings' noise models the averages were made with (plain data, for the
         result file), or None.
-    approach : (K, G, 3) the same sign taken from the last reading farther than each of ``gaps``
-        (G,) rad from the rest, when the recording shows the motion; ``direction`` is the first.
+    approach : (K, G, 3) the backlash contact side for a gap of each of ``gaps`` (G,) rad: the
+        sign of the last reversal of the readings across it (rests.approach_directions), when the
+        recording shows the motion; ``direction`` is one of them.
     """
 
     description: object
@@ -79,19 +80,21 @@ class Session:
 
     def with_backlash(self, width):
         """
-        Return the session with each joint's side from its last motion longer than its backlash.
+        Return the session with each joint's backlash side taken at a gap of ``width`` (3,) rad.
 
-        ``width`` (3,) rad: a reversal shorter than the gap leaves the contact where it was (an
-        overshoot at the end of a move), so a joint's side is taken from the last reading farther
-        from the rest than its width (the nearest of ``gaps``, at least the first; a width fitted
+        The side is that of the last reversal of the readings across the gap
+        (rests.approach_directions: an overshoot at a move's end that comes back by less leaves
+        the contact where it was), at the nearest of ``gaps`` (at least the first; a width fitted
         negative, on sides taken mostly wrong, by its size). The session itself when the
         recording did not give the approaches.
         """
         if self.approach is None:
             return self
-        pick = nearest_gap(self.gaps, np.maximum(np.abs(width), self.gaps[0]))
-        direction = self.approach[:, pick, np.arange(3)]
-        return dataclasses.replace(self, direction=direction)
+        return self.at_gaps(nearest_gap(self.gaps, np.maximum(np.abs(width), self.gaps[0])))
+
+    def at_gaps(self, pick):
+        """Return the session with each joint's sides taken at its gap ``gaps[pick]`` (3,)."""
+        return dataclasses.replace(self, direction=self.approach[:, pick, np.arange(3)])
 
     def measurements(self, camera_rotation=None):
         """

@@ -279,6 +279,38 @@ def test_backlash_sides_ignore_an_overshoot_shorter_than_the_gap(tmp_path):
     assert np.sum(z ** 2) < chi2_bound(3), z
 
 
+def test_backlash_sides_are_taken_at_the_gap_that_fits_best(tmp_path):
+    """
+    Sides taken at a wrong gap are wrong on a share of the rests; the fit picks the right gap.
+
+    The bag's moves are monotone and longer than any gap, so its sides are those of the
+    smallest gap; here they are spoilt where the gap is far from the truth's width: below 0.7 of
+    it (short returns counted as reversals) on 40 % of the rests, above 1.4 of it (reversals
+    missed) on 25 %, the start's coarse gap among them. A width fitted on the start's sides, and
+    the sides at that width in turn, may settle anywhere; the gap chosen by the fit gives back
+    the truth's sides and width.
+    """
+    width = np.array(EFFECTS['backlash']['backlash'])
+    bag = bag_sim.write(tmp_path / 'bag', bag_sim.BagSpec(poses=120, seed=17,
+                                                          effects=EFFECTS['backlash']))
+    session, _ = rests.load_session(bag.path)
+    truth_sides = session.approach[:, 0]
+    rng = np.random.default_rng(3)
+    approach = np.repeat(truth_sides[:, None, :], len(session.gaps), axis=1)
+    for j in range(3):
+        for g, gap in enumerate(session.gaps):
+            share = 0.4 if gap < 0.7 * width[j] else 0.25 if gap > 1.4 * width[j] else 0.0
+            approach[rng.random(len(session)) < share, g, j] *= -1
+    spoilt = dataclasses.replace(session, approach=approach,
+                                 direction=approach[:, rests.START_GAP])
+    d, meas = pipeline.calibrate_session(spoilt)
+    assert 'backlash' in d.final.model.effects
+    np.testing.assert_array_equal(meas.direction, truth_sides)
+    i = d.final.names.index('backlash1')
+    z = (d.final.model.effects['backlash'] - width) / d.final.std[i:i + 3]
+    assert np.sum(z ** 2) < chi2_bound(3), z
+
+
 def test_joint_states_serialized_by_rclpy_are_read(tmp_path):
     """Accept rclpy's JointState bytes, which have no padding before an empty effort sequence."""
     from rclpy.serialization import serialize_message

@@ -62,3 +62,42 @@ def test_rests_of_any_drivers_timing_are_found_and_average_to_the_truth(tmp_path
     assert chi2 < stats.chi2.ppf(0.99, d.size), notes
     readings = np.sum(((session.Theta - bag.Theta[found]) / session.sigma_Theta) ** 2)
     assert readings < stats.chi2.ppf(0.99, d.size)
+
+
+def play(x, gap):
+    """Return the contact side of a play of width ``gap`` driven by x (n,), from side +1."""
+    y, side = x[0] - gap / 2, 1.0
+    for v in x:
+        if v - y > gap / 2:
+            y, side = v - gap / 2, 1.0
+        elif v - y < -gap / 2:
+            y, side = v + gap / 2, -1.0
+    return side
+
+
+def test_the_sides_are_a_play_of_each_gap_driven_by_the_readings():
+    """approach_directions is the last contact of a backlash (a play) of each width in GAPS."""
+    rng = np.random.default_rng(8)
+    for _ in range(200):
+        # moves of any length, overshoots and returns, and the resolvers' count
+        steps = rng.normal(scale=rng.choice([2e-4, 1e-3, 5e-3]), size=(rng.integers(5, 60), 3))
+        Theta = np.round(np.cumsum(np.repeat(steps, 4, axis=0) / 4, axis=0) / 3.83e-5) * 3.83e-5
+        t = np.arange(len(Theta)) * 1e-3
+        sides = rests.approach_directions(t, Theta, t[-1] + 1e-3, np.ones((len(rests.GAPS), 3)))
+        expected = [[play(Theta[:, j], g) for j in range(3)] for g in rests.GAPS]
+        np.testing.assert_array_equal(sides, expected)
+
+
+def test_a_reversal_across_the_gap_counts_even_where_it_straddles_the_rest():
+    """Up to 0.4 mrad past the rest, down to 0.4 mrad short of it, back: the 0.6 gap is crossed."""
+    rise = np.linspace(-5e-3, 4e-4, 50)
+    Theta = np.column_stack([np.concatenate([rise, np.linspace(4e-4, -4e-4, 9), [-2e-4, 0.0]]),
+                             np.concatenate([rise, np.linspace(4e-4, 0.0, 11)]),
+                             np.full(61, 1e-3)])
+    t = np.arange(61) * 1e-3
+    previous = np.full((len(rests.GAPS), 3), -1.0)
+    sides = rests.approach_directions(t, Theta, 1.0, previous)
+    at = rests.nearest_gap(rests.GAPS, 6e-4)[0]
+    # joint 1 crossed it back (the reading farthest from the rest was the approach's, +1);
+    # joint 2 came back 0.4 mrad only: the approach's side; joint 3 did not move: as before
+    assert list(sides[at]) == [-1.0, 1.0, -1.0]

@@ -317,3 +317,24 @@ class JointReadings:
         self.direction = np.array(direction)
         return [g * ((a + b * d) - t0) + 0.0 for a, b, d, g, t0
                 in zip(alpha, self._half_backlash, direction, self._gain, self._theta0)]
+
+
+def reading_sides(Theta, width, start=1.0):
+    """
+    Return the backlash side (n, 3) JointReadings had at each of its successive readings (n, 3).
+
+    For scorers, who need the truth's sides where the calibration has only its own estimate.
+    JointReadings steps a reading by the whole width ``width`` (3,) rad, against its side, at the
+    step where the arm reverses, and while an arm moves the side is its motion's; so the side at
+    a reading is the sign of the last step between readings longer than half the width (``start``
+    before the first, and throughout for a joint without backlash).
+    """
+    Theta = np.asarray(Theta, dtype=float)
+    step = np.diff(Theta, axis=0)
+    width = np.broadcast_to(np.asarray(width, dtype=float), (Theta.shape[1],))
+    jumps = (np.abs(step) > 0.5 * width) & (width > 0)
+    index = np.arange(1, len(Theta))[:, None]
+    last = np.maximum.accumulate(np.vstack([np.zeros((1, Theta.shape[1]), dtype=int),
+                                            np.where(jumps, index, 0)]), axis=0)
+    signs = np.vstack([np.full((1, Theta.shape[1]), float(start)), np.sign(step)])
+    return np.take_along_axis(signs, last, axis=0)

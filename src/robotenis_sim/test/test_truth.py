@@ -116,3 +116,30 @@ def test_saved_truth_reads_back(truth, tmp_path):
     np.testing.assert_allclose(back.geometry.phi, t.geometry.phi)
     np.testing.assert_allclose(back.effects['backlash'], t.effects['backlash'])
     np.testing.assert_allclose(back.sphere_position, t.sphere_position)
+
+
+def test_the_sides_read_back_from_the_readings_are_the_simulators():
+    """reading_sides inverts JointReadings: moves, fast and slow returns, a count's rounding."""
+    t = sim_truth.with_effects(sim_truth.load(), backlash=[1e-3, 6e-4, 8e-4])
+    hook = sim_truth.JointReadings(t)
+    dt = 1e-3
+    time = np.arange(0.0, 8.0, dt)
+    # moves of 0.2 s to random rests every 0.5 s, then a decaying ringing: its first returns are
+    # fast (the side flips), its last ones slow (it stays)
+    targets = np.random.default_rng(2).uniform(-0.3, 0.3, size=(16, 3))
+    k, since = (time // 0.5).astype(int), time % 0.5
+    s = np.clip(since / 0.2, 0.0, 1.0)
+    move = targets[k - 1] + (targets[k] - targets[k - 1]) * (s * s * (3 - 2 * s))[:, None]
+    after = np.maximum(since - 0.2, 0.0)
+    ring = 4e-4 * np.sin(2 * np.pi * 12 * after) * np.exp(-after / 0.1)
+    alpha = np.asarray(t.geometry.theta0) + move + ring[:, None] * [1.0, 0.7, 0.4]
+    dalpha = np.gradient(alpha, dt, axis=0)
+    readings, sides = [], []
+    for a, da in zip(alpha, dalpha):
+        readings.append(hook(a, da))
+        sides.append(hook.direction.copy())
+    count = 3.83e-5
+    readings = np.round(np.array(readings) / count) * count
+    sides = np.array(sides)
+    assert np.all(np.sum(np.diff(sides, axis=0) != 0, axis=0) > 10)
+    np.testing.assert_array_equal(sim_truth.reading_sides(readings, [1e-3, 6e-4, 8e-4]), sides)

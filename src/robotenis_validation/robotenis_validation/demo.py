@@ -170,7 +170,8 @@ def against_the_truth(args):
     bag = sorted(glob.glob(os.path.join(args.out, 'session-*')))[-1]
     robot = sim_truth.load(os.path.join(args.out, 'truth.yaml'))
     session, d, meas = live_links.calibrated_as_the_service(bag, args.seed)
-    plain, final = (live_links.holdout_truth_error_mm(d, meas, session, robot, r.model)
+    sides = live_links.TrueSides.of_bag(bag, robot).at(session.stamps)
+    plain, final = (live_links.holdout_truth_error_mm(d, meas, session, robot, r.model, sides)
                     for r in (d.plain, d.final))
     nominal = description.nominal()
     fk = live_links.workspace_error_mm(result.calibrated_description(d, nominal), robot)

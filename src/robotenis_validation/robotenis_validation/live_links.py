@@ -5,13 +5,15 @@ Which link of the live chain limits a calibration: a recorded session scored lin
 calibration node records it) and the simulator's truth file it ran with, and prints:
 
 * the rests against the truth: each rest's averaged sphere centre minus where the truth puts the
-  ball for the rest's readings (its true arm angles, backlash side from the readings' motion);
+  ball for the rest's readings (its true arm angles, on the backlash sides the simulator had:
+  ``TrueSides``);
 * the detector alone: the ball rendered without sensor noise at those true positions with the
   hand camera's defaults and detected, per method: the detector's bias at each pose, the part of
   a rest's error that averaging its frames does not remove (study.detector_bias), and what is left
   of the rests' error without it;
 * the backlash side: the same difference when each joint's side is the one that fits best (a
-  side the readings got wrong shows as a large drop);
+  side the scorer got wrong shows as a large drop), and how many of the sides the calibration
+  took (a play of the gap it chose) differ from the simulator's;
 * the bag calibrated as recorded and with each rest's detector bias taken out (what the chain
   would give with an unbiased detector): the effects claimed and the FK error against the truth
   at the session's rests (RMS, and less its common offset, which the hand camera barely sees)
@@ -30,7 +32,7 @@ import itertools
 import sys
 
 import numpy as np
-from robotenis_calibration import diagnosis, pipeline, rests, result
+from robotenis_calibration import bag_io, diagnosis, pipeline, rests, result
 from robotenis_kinematics import delta, description, effects, workspace
 from robotenis_sim import static_session
 from robotenis_sim import truth as sim_truth
@@ -51,14 +53,34 @@ def true_sphere(truth, Theta, direction):
     return truth.camera_reading(true_centres(truth, Theta, direction))
 
 
-def best_sides(truth, session):
+@dataclasses.dataclass
+class TrueSides:
+    """The simulator's backlash contact side (n, 3) at each joint state (n,) of a session bag."""
+
+    t: np.ndarray
+    sides: np.ndarray
+
+    @classmethod
+    def of_bag(cls, bag, truth):
+        """Read them from a bag's joint states (sim_truth.reading_sides, the truth's widths)."""
+        with bag_io.BagReader(bag) as reader:
+            rec = rests.read(reader, [])
+        width = truth.effects.get('backlash', np.zeros(3))
+        return cls(rec.t_joint, sim_truth.reading_sides(rec.Theta, width))
+
+    def at(self, stamps):
+        """Return the sides (K, 3) at the times ``stamps`` (K,), s: a rest's middle."""
+        return self.sides[np.clip(np.searchsorted(self.t, stamps), 0, len(self.t) - 1)]
+
+
+def best_sides(truth, session, sides):
     """Return the rests' error (K, 3) with each joint's backlash side the one that fits best."""
     out, flipped = [], 0
     for k in range(len(session)):
         trials = []
         for signs in itertools.product((1.0, -1.0), repeat=3):
             e = session.sphere[k] - true_sphere(truth, session.Theta[k:k + 1],
-                                                session.direction[k] * np.array(signs))[0]
+                                                sides[k] * np.array(signs))[0]
             trials.append((float(np.linalg.norm(e)), signs, e))
         _, signs, e = min(trials, key=lambda t: t[0])
         out.append(e)
@@ -74,33 +96,38 @@ def workspace_error_mm(desc, truth, n=500, seed=900):
     return float(np.sqrt(np.mean(np.sum((P - P_true) ** 2, axis=1))) * 1e3)
 
 
-def rest_error_mm(desc, truth, session):
+def rest_error_mm(desc, truth, Theta, direction, sides):
     """
-    Return the FK error (mm) of a description at a session's rests against the truth.
+    Return the FK error (mm) of a description against the truth at rests read Theta (K, 3).
 
-    (RMS 3D error, the same less its mean over the rests): the second leaves out the common
-    offset along which a hand camera's incremental measurements barely pin the robot.
+    The description on the calibration's backlash sides ``direction`` (K, 3), the truth on its
+    own ``sides`` (K, 3). (RMS 3D error, the same less its mean over the rests): the second leaves
+    out the common offset along which a hand camera's incremental measurements barely pin the
+    robot.
     """
     fx = effects.parameters(desc)
-    P = delta.forward(desc, effects.arm_angles(desc, fx, session.Theta, session.direction))
-    arm = truth.arm_angles(truth.motor_from_reading(session.Theta), session.direction)
+    P = delta.forward(desc, effects.arm_angles(desc, fx, Theta, direction))
+    arm = truth.arm_angles(truth.motor_from_reading(Theta), sides)
     e = (P - delta.forward(truth.geometry, arm)) * 1e3
     rms = float(np.sqrt(np.mean(np.sum(e ** 2, axis=1))))
     return rms, float(np.sqrt(np.mean(np.sum((e - e.mean(axis=0)) ** 2, axis=1))))
 
 
-def holdout_truth_error_mm(d, meas, session, truth, model=None):
+def holdout_truth_error_mm(d, meas, session, truth, model=None, sides=None):
     """
     Return the RMS error (mm) of a diagnosis's model at its held-out rests against the truth.
 
     diagnosis.position_errors of ``model`` (default the final one) on the rests the loop held out
     (``d.holdout``; ``meas`` as the loop used it, its backlash sides included), each camera reading
     replaced by what the truth's camera reads there without noise (Pi_k = -R s_k, as
-    Session.measurements). The truth's own sides come from the readings' motions longer than its
-    backlash, as the simulator takes them.
+    Session.measurements), on the truth's own backlash sides ``sides`` (K, 3): for a live bag
+    ``TrueSides.at(session.stamps)``; by default those of a play of the truth's width
+    (Session.with_backlash), as the static simulators take them.
     """
     gap = truth.effects.get('backlash')
-    sides = session.direction if gap is None else session.with_backlash(np.asarray(gap)).direction
+    if sides is None:
+        sides = (session.direction if gap is None
+                 else session.with_backlash(np.asarray(gap)).direction)
     s_true = true_sphere(truth, session.Theta, sides)
     R = session.description.camera_rotation
     seen = dataclasses.replace(meas, Pi=-s_true @ R.T, Pi_basis=None).subset(d.holdout)
@@ -127,17 +154,20 @@ def without_bias(session, bias):
     return dataclasses.replace(kept, sphere=kept.sphere - bias[ok])
 
 
-def calibration_line(label, session, truth):
+def calibration_line(label, session, truth, true_sides):
     """Calibrate a session as `calibrate` does and score it against the truth: one line."""
     d, meas = pipeline.calibrate_session(session)
     desc = result.calibrated_description(d, session.description)
-    at_rests, less_offset = rest_error_mm(desc, truth, session)
+    sides = true_sides.at(session.stamps)
+    at_rests, less_offset = rest_error_mm(desc, truth, session.Theta, meas.direction, sides)
+    held_out = holdout_truth_error_mm(d, meas, session, truth, sides=sides)
+    differ = int(np.sum(meas.direction != sides)) if 'backlash' in truth.effects else 0
     return (f'{label}: claimed {", ".join(d.final.model.effects) or "nothing"}; held-out '
-            f'{d.errors_mm["final"]:.3f} mm (camera), '
-            f'{holdout_truth_error_mm(d, meas, session, truth):.3f} mm against the truth; FK '
+            f'{d.errors_mm["final"]:.3f} mm (camera), {held_out:.3f} mm against the truth; FK '
             'against the truth at the rests '
             f'{at_rests:.3f} mm ({less_offset:.3f} less its common offset), over the workspace '
-            f'{workspace_error_mm(desc, truth):.3f} mm')
+            f'{workspace_error_mm(desc, truth):.3f} mm; {differ} of {sides.size} backlash sides '
+            "differ from the simulator's")
 
 
 def _line(label, e):
@@ -153,20 +183,22 @@ def main(argv=None):
     args = parser.parse_args(argv)
     truth = sim_truth.load(args.truth)
     session, _ = rests.load_session(args.bag)
+    true_sides = TrueSides.of_bag(args.bag, truth)
+    sides = true_sides.at(session.stamps)
     print('optical x, y, z:')
-    error = session.sphere - true_sphere(truth, session.Theta, session.direction)
+    error = session.sphere - true_sphere(truth, session.Theta, sides)
     print(_line('rests minus truth', error))
-    C = true_centres(truth, session.Theta, session.direction)
+    C = true_centres(truth, session.Theta, sides)
     bias = {m: detector_bias(C, truth.geometry.sphere_radius, m) for m in METHODS}
     for method in METHODS:
         ok = np.all(np.isfinite(bias[method]), axis=1)
         print(_line(f'detector bias ({method}), noise-free renders', bias[method][ok]))
         print(_line(f'rests minus truth minus the {method} bias', (error - bias[method])[ok]))
-    e, flipped = best_sides(truth, session)
+    e, flipped = best_sides(truth, session, sides)
     print(_line(f'rests, best backlash sides ({flipped} of {3 * len(session)} flipped)', e))
-    print(calibration_line('calibrated as recorded', session, truth))
+    print(calibration_line('calibrated as recorded', session, truth, true_sides))
     print(calibration_line('calibrated with the model bias taken out',
-                           without_bias(session, bias['model']), truth))
+                           without_bias(session, bias['model']), truth, true_sides))
     if args.result:
         print(f'FK of {args.result} against the truth over 500 boundary poses: '
               f'{workspace_error_mm(description.load(args.result), truth):.3f} mm '

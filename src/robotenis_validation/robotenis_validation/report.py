@@ -96,8 +96,10 @@ def section_residual_loop(nominal, truth, n, seeds, out_dir, image_poses, image_
             s, d = image_run(robot, nominal, image_poses, 100 + seed)
             seen.append(d.effects == ([name] if effect else []))
             held_out.append(d.errors_mm['final'])
+            # a static session's sides are the truth's and the calibration's alike
             at_rests.append(live_links.rest_error_mm(
-                result.calibrated_description(d, nominal), robot, s)[1])
+                result.calibrated_description(d, nominal), robot, s.Theta, s.direction,
+                s.direction)[1])
         rows.append([name, f'{named}/{seeds}', f'{e[0]:.3f}', f'{e[1]:.3f}', f'{e[2]:.3f}',
                      f'{sum(seen)}/{image_seeds}', f'{np.mean(held_out):.3f}',
                      f'{np.mean(at_rests):.3f}'])

@@ -49,8 +49,9 @@ def test_the_truths_own_geometry_has_no_fk_error_at_the_rests(tmp_path):
     bag = session_bag.write(tmp_path / 'bag', session_bag.BagSpec(poses=30, seed=5))
     truth = sim_truth.load()
     session, _ = rests.load_session(bag.path)
-    assert live_links.rest_error_mm(truth.geometry, truth, session) == (0.0, 0.0)
-    rms, less_offset = live_links.rest_error_mm(description.nominal(), truth, session)
+    at = (session.Theta, session.direction, session.direction)
+    assert live_links.rest_error_mm(truth.geometry, truth, *at) == (0.0, 0.0)
+    rms, less_offset = live_links.rest_error_mm(description.nominal(), truth, *at)
     assert 0 < less_offset < rms
 
 
