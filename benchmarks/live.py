@@ -64,7 +64,7 @@ def scored(label, d, meas, session, robot, sides):
     held_out = live_links.holdout_truth_error_mm(d, meas, session, robot, sides=sides)
     whole = workspace_error_mm(desc, robot)
     at, less = live_links.rest_error_mm(desc, robot, session.Theta, meas.direction, sides)
-    return (f'    {label:36s} {", ".join(d.final.model.effects) or "nothing":40s} held-out '
+    return (f'    {label:36s} {", ".join(d.effects) or "nothing":40s} held-out '
             f'{held_out:6.3f} mm; FK at the rests {at:6.3f} mm ({less:.3f} less offset), '
             f'workspace {whole:6.3f} mm'), (held_out, whole)
 

@@ -162,7 +162,7 @@ def calibration_line(label, session, truth, true_sides):
     at_rests, less_offset = rest_error_mm(desc, truth, session.Theta, meas.direction, sides)
     held_out = holdout_truth_error_mm(d, meas, session, truth, sides=sides)
     differ = int(np.sum(meas.direction != sides)) if 'backlash' in truth.effects else 0
-    return (f'{label}: claimed {", ".join(d.final.model.effects) or "nothing"}; held-out '
+    return (f'{label}: claimed {", ".join(d.effects) or "nothing"}; held-out '
             f'{d.errors_mm["final"]:.3f} mm (camera), {held_out:.3f} mm against the truth; FK '
             'against the truth at the rests '
             f'{at_rests:.3f} mm ({less_offset:.3f} less its common offset), over the workspace '
