@@ -126,7 +126,7 @@ class SimMotorsNode(Node):
                                    'nominal masses')
             return description.load(description_path), MassParameters(), None
         truth = sim_truth.load(truth_path or None)
-        joint = set(truth.effects) & {'joint_scale', 'backlash', 'gravity_compliance'}
+        joint = set(truth.effects) & set(sim_truth.JOINT_EFFECTS)
         if joint:
             self.get_logger().info('undeclared joint effects simulated: '
                                    f"{', '.join(sorted(joint))}")

@@ -38,6 +38,8 @@ import yaml
 
 EFFECTS = ('joint_scale', 'backlash', 'gravity_compliance', 'base_geometry', 'hand_eye_rotation',
            'joint_eccentricity', 'camera_depth_scale', 'lens_residue')
+# the effects between an arm and its resolver's reading, which JointReadings applies
+JOINT_EFFECTS = ('joint_scale', 'backlash', 'gravity_compliance', 'joint_eccentricity')
 SCALAR_EFFECTS = ('camera_depth_scale', 'lens_residue')
 G = model_effects.G
 rotation_vector_matrix = model_effects.rotation_vector_matrix
@@ -291,9 +293,7 @@ class JointReadings:
     def __init__(self, truth, min_speed=0.02):
         self.truth, self.min_speed = truth, min_speed
         self.direction = np.ones(3)
-        joint = set(truth.effects) & {'backlash', 'joint_scale', 'gravity_compliance',
-                                      'joint_eccentricity'}
-        self._plain = joint <= self.PLAIN
+        self._plain = set(truth.effects) & set(JOINT_EFFECTS) <= self.PLAIN
         fx = truth.effects
         self._half_backlash = (0.5 * np.asarray(fx.get('backlash', np.zeros(3)))).tolist()
         self._gain = (1 + np.asarray(fx.get('joint_scale', np.zeros(3)), dtype=float)).tolist()

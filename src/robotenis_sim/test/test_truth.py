@@ -143,3 +143,25 @@ def test_the_sides_read_back_from_the_readings_are_the_simulators():
     sides = np.array(sides)
     assert np.all(np.sum(np.diff(sides, axis=0) != 0, axis=0) > 10)
     np.testing.assert_array_equal(sim_truth.reading_sides(readings, [1e-3, 6e-4, 8e-4]), sides)
+
+
+def test_every_effect_on_the_readings_is_simulated_on_the_readings():
+    """An effect that changes Truth.increments is one JointReadings applies (JOINT_EFFECTS)."""
+    from robotenis_sim import scenarios
+    values = {**{k: v for k, v in scenarios.EFFECTS.items() if v},
+              **{k: v for k, (v, _) in scenarios.OUTSIDE_LIBRARY.items()}}
+    plain = sim_truth.load()
+    arm = np.asarray(plain.geometry.theta0) + np.array([[0.1, -0.2, 0.3], [-0.3, 0.2, 0.05]])
+    P = delta.forward(plain.geometry, arm)
+    direction = np.array([[1.0, -1.0, 1.0], [-1.0, 1.0, -1.0]])
+    for effect in values.values():
+        t = sim_truth.with_effects(plain, **effect)
+        (name,) = set(t.effects)
+        moved = not np.allclose(t.increments(arm, direction, P),
+                                plain.increments(arm, direction, P), rtol=0, atol=1e-9)
+        assert moved == (name in sim_truth.JOINT_EFFECTS), name
+        if moved:
+            hook = sim_truth.JointReadings(t)
+            hook.direction = direction[0]
+            np.testing.assert_allclose(hook(arm[0], np.zeros(3)),
+                                       t.increments(arm[0], direction[0], P[0]), atol=1e-12)
