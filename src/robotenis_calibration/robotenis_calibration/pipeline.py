@@ -24,7 +24,6 @@ import numpy as np
 
 from robotenis_calibration import diagnosis, rests, result
 from robotenis_calibration.rests import RestParameters
-from robotenis_calibration.session import nearest_gap
 from robotenis_kinematics import description
 from robotenis_kinematics import identification as idf
 from robotenis_ros.names import JOINTS
@@ -145,8 +144,7 @@ def backlash_gaps(session, d):
         except (ValueError, ArithmeticError, np.linalg.LinAlgError):
             return np.inf
 
-    width = final.model.effects['backlash']
-    pick = nearest_gap(session.gaps, np.maximum(np.abs(width), session.gaps[0]))
+    pick = session.gap_index(final.model.effects['backlash'])
     best = chi2(pick)
     for _ in range(SIDE_ROUNDS):
         start = pick.copy()

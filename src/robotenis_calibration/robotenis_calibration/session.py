@@ -90,7 +90,11 @@ class Session:
         """
         if self.approach is None:
             return self
-        return self.at_gaps(nearest_gap(self.gaps, np.maximum(np.abs(width), self.gaps[0])))
+        return self.at_gaps(self.gap_index(width))
+
+    def gap_index(self, width):
+        """Return the index in ``gaps`` (3,) nearest each joint's ``width`` (with_backlash's)."""
+        return nearest_gap(self.gaps, np.maximum(np.abs(width), self.gaps[0]))
 
     def at_gaps(self, pick):
         """Return the session with each joint's sides taken at its gap ``gaps[pick]`` (3,)."""
