@@ -127,13 +127,17 @@ def test_the_bag_opens_with_rosbags_and_with_mcap(stopped_session):
     _, _, bag, _, _ = stopped_session
     with AnyReader([bag]) as reader:
         types = {c.topic: c.msgtype for c in reader.connections}
-        counts = {}
+        counts, started = {}, 0
         for connection, _, raw in reader.messages():
-            reader.deserialize(raw, connection.msgtype)
+            msg = reader.deserialize(raw, connection.msgtype)
             counts[connection.topic] = counts.get(connection.topic, 0) + 1
+            started += connection.topic == '/calibration/rest' and msg.start
     assert {t: types[t] for t in CONTRACT} == CONTRACT
     assert counts['/robot_description'] == 1 and counts['/joint_states'] > 1000
     assert counts['/calibration/rest'] >= 4       # two rests measured, each opened and closed
+    # the node takes the images only from a rest's start until it keeps images_per_pose (2) of
+    # them: the two rests measured kept theirs, and no rest kept more
+    assert 4 <= counts['/camera/image_raw/compressed'] <= 2 * started
     (path,) = bag.glob('*.mcap')
     with open(path, 'rb') as f:
         summary = make_reader(f).get_summary()

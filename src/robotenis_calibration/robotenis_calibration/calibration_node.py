@@ -10,10 +10,13 @@ declared description, joint states, sphere positions and detections, camera info
 markers, progress, and of the camera images only the first ``images_per_pose`` frames of each rest,
 as lossless PNG (sensor_msgs/CompressedImage on ``image_topic``/compressed): enough to check or
 re-run the detector on every pose, at a small share of the bag (all frames raw would be 300 kB
-each at 120 Hz). The subscribed topics are recorded as the bytes that arrived (as ``ros2 bag
-record`` does; rclpy's own serialization of a JointState has trailing bytes that rosbags' reader
-refuses). The bag names the topics as the calibration contract does (/joint_states,
-/sphere/position, /robot_description, ...) whatever the node's namespace. When the session is
+each at 120 Hz). The images are subscribed only from a rest's start until its frames are kept:
+taking a 640x480 frame costs about 1.1 ms, at 100 Hz a tenth of a core, and a session keeps 2 of
+about 110 per pose (a new subscription matches the camera's publisher within about 10 ms here).
+The subscribed topics are recorded as the bytes that arrived (as ``ros2 bag record`` does;
+rclpy's own serialization of a JointState has trailing bytes that rosbags' reader refuses).
+The bag names the topics as the calibration contract does (/joint_states, /sphere/position,
+/robot_description, ...) whatever the node's namespace. When the session is
 over the bag is calibrated exactly as `./robotenis calibrate BAG --out RESULT.yaml` would do it
 (robotenis_calibration.pipeline). A request that cannot give the rests the identification needs
 is refused before anything moves, and a session whose joint states or detections stop for longer
@@ -114,8 +117,7 @@ class CalibrationNode(Node):
             qos = qos_profile_sensor_data if topic.startswith('camera') else QUEUE
             callback = fed.get(topic, lambda data, t=topic: self.record(t, data, self.stamp_ns()))
             self.create_subscription(cls, topic, callback, qos, raw=True)
-        self.create_subscription(Image, self.image_topic, self.on_image, qos_profile_sensor_data,
-                                 raw=True)
+        self.image_subscription = None  # while a rest keeps images: see watch_images
         # The service is answered when the session is over, minutes later: meanwhile the timer
         # and the subscriptions run, and a second request is answered "busy".
         self.service = DeferredService(self, Calibrate, 'calibrate', self.on_calibrate)
@@ -152,12 +154,22 @@ class CalibrationNode(Node):
             self.runner.detection(stamp_ns * 1e-9, xyz(msg.position),
                                   np.reshape(msg.covariance, (3, 3)))
 
+    def watch_images(self, on):
+        """Subscribe to the camera images (``on``) or stop taking them."""
+        if on and self.image_subscription is None:
+            self.image_subscription = self.create_subscription(
+                Image, self.image_topic, self.on_image, qos_profile_sensor_data, raw=True)
+        elif not on and self.image_subscription is not None:
+            self.destroy_subscription(self.image_subscription)
+            self.image_subscription = None
+
     def on_image(self, data):
         """Record the first images_per_pose mono8 frames of each rest as PNG."""
         if self.runner is None or self.writer is None or self.runner.state != MEASURING:
             return
         index = self.runner.index
-        if self.images_kept.get(index, 0) >= self.get_parameter('images_per_pose').value:
+        wanted = self.get_parameter('images_per_pose').value
+        if self.images_kept.get(index, 0) >= wanted:
             return
         msg = deserialize_message(data, Image)
         try:
@@ -170,6 +182,8 @@ class CalibrationNode(Node):
                     CompressedImage(header=msg.header, format=bag_io.PNG_FORMAT,
                                     data=array.array('B', bag_io.png(pixels))))
         self.images_kept[index] = self.images_kept.get(index, 0) + 1
+        if self.images_kept[index] >= wanted:
+            self.watch_images(False)
 
     def on_timer(self):
         if self.runner is None:
@@ -196,6 +210,8 @@ class CalibrationNode(Node):
             self.record('goal', goal)
         elif kind in ('rest_start', 'rest_end'):
             marker = RestMarker(pose_index=int(value), start=(kind == 'rest_start'))
+            self.watch_images(kind == 'rest_start'
+                              and self.get_parameter('images_per_pose').value > 0)
             marker.header.stamp = stamp
             self.rest_pub.publish(marker)
             self.record('calibration/rest', marker)
@@ -253,6 +269,7 @@ class CalibrationNode(Node):
         return response
 
     def end_session(self, answer, response):
+        self.watch_images(False)
         self.close_bag()
         self.runner, self.session = None, None
         self.busy = False

@@ -8,55 +8,32 @@ stamp and the numbers: same length, same bytes elsewhere. Such messages are stac
 message by message (about 15 us each in Python). A message whose layout differs from its group's
 (other names, another frame) is left to the caller's message-by-message decoder.
 
-CDR (XCDR1): a 4-byte encapsulation header (byte 1: 1 little endian, 0 big endian), then the
-fields, each aligned to its size relative to the end of the encapsulation.
+CDR: robotenis_ros.cdr.
 """
 import struct
 
 import numpy as np
-
-HEADER = 4                 # the encapsulation
-STAMP = slice(4, 12)       # builtin_interfaces/Time: int32 sec, uint32 nanosec
-
-
-def _align(pos, n):
-    return pos + (-(pos - HEADER)) % n
-
-
-def _uint32(data, pos, order):
-    pos = _align(pos, 4)
-    return struct.unpack_from(order + 'I', data, pos)[0], pos + 4
-
-
-def _string(data, pos, order):
-    n, pos = _uint32(data, pos, order)
-    return data[pos:pos + n].rstrip(b'\0').decode(), pos + n
-
-
-def _order(data):
-    if len(data) < HEADER or data[1] not in (0, 1):
-        raise ValueError('not a CDR encapsulated message')
-    return '<' if data[1] == 1 else '>'
+from robotenis_ros.cdr import align, byte_order, HEADER, STAMP, string, uint32
 
 
 def point_layout(data):
     """Return the byte offset of point.x in a geometry_msgs/PointStamped, and the byte order."""
-    order = _order(data)
-    _, pos = _string(data, STAMP.stop, order)                  # header.frame_id
-    return _align(pos, 8), order
+    order = byte_order(data)
+    _, pos = string(data, STAMP.stop, order)                  # header.frame_id
+    return align(pos, 8), order
 
 
 def joint_state_layout(data):
     """Return (names, offset of the positions, number of positions, byte order) of a JointState."""
-    order = _order(data)
-    _, pos = _string(data, STAMP.stop, order)                  # header.frame_id
-    count, pos = _uint32(data, pos, order)
+    order = byte_order(data)
+    _, pos = string(data, STAMP.stop, order)                  # header.frame_id
+    count, pos = uint32(data, pos, order)
     names = []
     for _ in range(count):
-        name, pos = _string(data, pos, order)
+        name, pos = string(data, pos, order)
         names.append(name)
-    n, pos = _uint32(data, pos, order)
-    return tuple(names), (_align(pos, 8) if n else pos), n, order
+    n, pos = uint32(data, pos, order)
+    return tuple(names), (align(pos, 8) if n else pos), n, order
 
 
 def _groups(datas):

@@ -2,8 +2,9 @@
 from builtin_interfaces.msg import Time as TimeMsg
 import numpy as np
 import pytest
+from rclpy.serialization import serialize_message
 from rclpy.time import Time
-from robotenis_ros import convert
+from robotenis_ros import cdr, convert
 from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import Header
 
@@ -55,3 +56,36 @@ def test_image_array_names_what_is_wrong():
         convert.image_array(Image(height=1, width=1, step=3, encoding='rgb8', data=b'abc'))
     with pytest.raises(ValueError, match='too short'):
         convert.image_array(Image(height=2, width=4, step=4, encoding='mono8', data=b'abcd'))
+
+
+def _serialized_image(pixels, frame_id='camera_optical', step=None, encoding='mono8'):
+    height, width = pixels.shape
+    step = step or width
+    padded = np.zeros((height, step), np.uint8)
+    padded[:, :width] = pixels
+    msg = Image(height=height, width=width, step=step, encoding=encoding,
+                data=padded.tobytes())
+    msg.header.stamp, msg.header.frame_id = TimeMsg(sec=7, nanosec=123_456_789), frame_id
+    return serialize_message(msg)
+
+
+def test_cdr_image_reads_what_rclpy_serializes():
+    pixels = np.random.default_rng(0).integers(0, 256, (5, 7), dtype=np.uint8)
+    for frame_id in ('', 'c', 'camera_optical', 'odd_frame'):       # every alignment after it
+        for step in (7, 9):
+            frame = cdr.image(_serialized_image(pixels, frame_id, step))
+            assert (frame.sec, frame.nanosec, frame.frame_id) == (7, 123_456_789, frame_id)
+            np.testing.assert_array_equal(frame.pixels, pixels)
+            assert not frame.pixels.flags.writeable     # a view of the bytes, not a copy
+
+
+def test_cdr_image_names_what_is_wrong():
+    pixels = np.zeros((4, 4), np.uint8)
+    with pytest.raises(ValueError, match='rgb8'):
+        cdr.image(_serialized_image(pixels, encoding='rgb8'))
+    with pytest.raises(ValueError, match='too short'):
+        cdr.image(_serialized_image(pixels)[:-3])
+    with pytest.raises(ValueError, match='not a CDR'):
+        cdr.image(b'\x00\x07\x00\x00' + bytes(40))
+    with pytest.raises(ValueError, match='sensor_msgs/Image'):
+        cdr.image(_serialized_image(pixels)[:20])

@@ -1,7 +1,8 @@
 """
 The `sphere_detector` node: the sphere's centre from the hand camera's images.
 
-Subscribes camera/image_raw (sensor_msgs/Image, mono8) and camera/camera_info (sensor-data QoS);
+Subscribes camera/image_raw (sensor_msgs/Image, mono8, read from its bytes: robotenis_ros.cdr)
+and camera/camera_info (sensor-data QoS);
 publishes sphere/position (geometry_msgs/PointStamped, optical frame, m, stamp of the image) and
 sphere/detection (robotenis_interfaces/SphereDetection: covariance, frames, edge points, fit RMS,
 method). With ``frames`` > 1 it publishes the average of every ``frames`` detections (outliers
@@ -20,17 +21,20 @@ vision``). Parameters: the table PARAMETERS.
 """
 import sys
 
+from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped
 import numpy as np
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from robotenis_interfaces.msg import SphereDetection
 from robotenis_kinematics import description
-from robotenis_ros.convert import image_array, point_stamped, stamp_seconds
+from robotenis_ros import cdr
+from robotenis_ros.convert import point_stamped, stamp_seconds
 from robotenis_ros.node import declare_parameters, spin
 from robotenis_vision import averaging, camera as camera_model, detector
 from robotenis_vision.rest import RestCorrection
 from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import Header
 
 PARAMETERS = {
     'method': ('conic', f"on every frame: one of {', '.join(detector.METHODS)}"),
@@ -103,7 +107,8 @@ class SphereDetectorNode(Node):
         self.detection_pub = self.create_publisher(SphereDetection, 'sphere/detection', 10)
         self.create_subscription(CameraInfo, 'camera/camera_info', self.on_camera_info,
                                  qos_profile_sensor_data)
-        self.create_subscription(Image, 'camera/image_raw', self.on_image, qos_profile_sensor_data)
+        self.create_subscription(Image, 'camera/image_raw', self.on_image, qos_profile_sensor_data,
+                                 raw=True)
         self.get_logger().info(f'sphere radius {self.radius * 1e3:.2f} mm, method {self.method}'
                                f"{', at rest ' + self.rest_method if self.rest_method else ''}, "
                                f'{self.frames} frame(s) per measurement')
@@ -121,17 +126,24 @@ class SphereDetectorNode(Node):
         except camera_model.CameraError as e:
             self.get_logger().error(f'camera_info unusable: {e}', throttle_duration_sec=5.0)
 
-    def on_image(self, msg):
+    def on_image(self, data):
         if self.camera is None:
             self.drop('no camera_info received yet')
             return
-        t = stamp_seconds(msg.header.stamp)
+        try:
+            frame = cdr.image(data)
+        except ValueError as e:
+            self.drop(str(e))
+            return
+        header = Header(stamp=Time(sec=frame.sec, nanosec=frame.nanosec),
+                        frame_id=frame.frame_id or 'camera_optical')
+        t = stamp_seconds(header.stamp)
         track, self.track = self.track, ()
         if not track and self.next_search - self.search_interval <= t < self.next_search:
             return                      # the ball was lost (the reason logged)
         seed = detector.moved_prior(self.camera, track, t) if track else None
+        image = frame.pixels
         try:
-            image = image_array(msg)
             det = detector.detect(image, self.camera, self.radius, self.method, seed,
                                   self.gamma)
         except (ValueError, detector.DetectionError) as e:
@@ -150,7 +162,7 @@ class SphereDetectorNode(Node):
             self.drop(f'outline fit RMS {det.fit_rms_px:.2f} px > {self.max_rms} px')
             return
         if self.frames == 1:
-            self.publish(det, msg.header, 1)
+            self.publish(det, header, 1)
             return
         self.batch.append(det)
         if len(self.batch) == self.frames:
@@ -158,7 +170,7 @@ class SphereDetectorNode(Node):
                                     [d.covariance for d in self.batch])
             det.position, det.covariance = avg.position, avg.covariance
             self.batch = []
-            self.publish(det, msg.header, avg.frames)
+            self.publish(det, header, avg.frames)
 
     def rest_fit(self, image, seed):
         """Run the rest method on an image from a seed (RestCorrection's accurate method)."""
@@ -166,14 +178,13 @@ class SphereDetectorNode(Node):
                                self.gamma, search=False)
 
     def publish(self, det, header, frames):
-        header.frame_id = header.frame_id or 'camera_optical'
         self.position_pub.publish(point_stamped(det.position, header.stamp, header.frame_id))
         self.detection_pub.publish(detection_message(det, header, frames))
 
 
 def main(args=None):
     return spin(SphereDetectorNode, 'sphere_detector', (ValueError, description.DescriptionError),
-                args)
+                args, events=True)
 
 
 if __name__ == '__main__':

@@ -2,9 +2,11 @@
 import numpy as np
 import pytest
 import rclpy
+from rclpy.serialization import serialize_message
 from robotenis_ros.convert import camera_info_message, image_message
 from robotenis_vision import camera as vision_camera, detector
 from robotenis_vision.sphere_detector_node import detection_message, SphereDetectorNode
+from sensor_msgs.msg import Image
 import simple_render
 from std_msgs.msg import Header
 
@@ -49,7 +51,7 @@ def node():
 def feed(node, pixels, t):
     header = Header(frame_id='camera_optical')
     header.stamp.sec, header.stamp.nanosec = int(t), int(round((t % 1) * 1e9))
-    node.on_image(image_message(pixels, header))
+    node.on_image(serialize_message(image_message(pixels, header)))   # as raw=True takes it
 
 
 def test_at_rest_the_model_fits_mean_images_at_powers_of_two_and_corrects_frames(
@@ -106,3 +108,14 @@ def test_a_lost_ball_is_searched_again_after_search_interval_of_image_time(node,
     # image time going back (a bag replayed from its start) does not hold the search off
     feed(node, empty, 0.0)
     assert len(calls) == 7
+
+
+def test_an_image_it_cannot_read_is_dropped_with_the_reason(node, monkeypatch):
+    reasons = []
+    monkeypatch.setattr(node, 'drop', reasons.append)
+    colour = Image(height=2, width=2, step=6, encoding='rgb8', data=bytes(12))
+    node.on_image(serialize_message(colour))
+    node.on_image(serialize_message(Image(height=4, width=4, step=4, encoding='mono8',
+                                          data=bytes(8))))
+    assert node.detection_pub.messages == []
+    assert 'rgb8' in reasons[0] and 'too short' in reasons[1]
