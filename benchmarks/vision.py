@@ -33,9 +33,9 @@ minor semi-axis) measured in the same run:
 6. speed on one core, 640x480: a stream of frames (each seeded by the last; target < 2 ms) and a
    single image (< 5 ms), and the render time of the project's renderer (< 4 ms);
 7. at rest, as the sphere_detector node measures (robotenis_vision.rest.RestCorrection: the conic
-   on every frame, the model fit on mean images at powers of two) against the node before it (the
-   model fit seeded on every frame at rest): the model fits' CPU per rest, and the error of the
-   mean of a rest's last frames, the part the calibration averages.
+   on every frame, the model fit on mean images at 1, 8, 16, 32 frames) against the node before
+   it (the model fit seeded on every frame at rest): the model fits' CPU per rest, and the error
+   of the mean of a rest's last frames, the part the calibration averages.
 """
 import os
 

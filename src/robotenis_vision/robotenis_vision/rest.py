@@ -4,9 +4,9 @@ When the ball stands still in the image: the fast method corrected by the accura
 The sphere_detector node measures every frame with its fast method (the conic method seeded by
 the last frame). Once the ball's image has moved less than ``motion_px`` between frames for
 ``frames`` frames in a row (the robot at rest: RestSwitch), the frames are summed, and the
-accurate method (the model fit) runs on their mean image each time their number reaches a power
-of two: log2(n) + 1 fits for n frames at rest instead of n (MeanCorrection). Each frame k then
-gives
+accurate method (the model fit) runs on their mean image on the first frame and each time their
+number reaches a power of two from FIRST_MEAN (8) on: log2(n) - 1 fits for n >= 8 frames at rest
+instead of n (MeanCorrection). Each frame k then gives
 
     p_k = f_k + (a(M_j) - mean(f_1 .. f_j))
 
@@ -25,11 +25,21 @@ those poses.) RestCorrection is the sphere_detector node's step per frame. A mea
 one ball position: if the fast detection leaves the summed frames' mean by more than ``motion_px``,
 the sum starts again from that frame. With a camera response gamma != 1 the mean of encoded grey
 levels is fitted, a second-order error of (noise / level)^2, negligible at the noise of a camera.
+
+The fits at 2 and 4 frames are skipped: they would only correct frames 2-7 of a rest, which a
+session lets go by while it settles (the demo's 0.3 s settle is 36 frames at 120 Hz). On the 16
+rests of benchmarks/vision.py section 5 (36 frames settling, 30 averaged) the averages came out
+the same to 0.003 mm with 4 fits a rest instead of 6 (149 against 230 ms of CPU); fits at powers
+of four (1, 4, 16) instead moved a rest at 0.45 m by 0.32 mm: the last 30 frames then take their
+correction from a 16-frame mean instead of a 32-frame one, and depth noise grows as the range
+squared.
 """
 from dataclasses import replace
 
 import numpy as np
 from robotenis_vision.detection import DetectionError
+
+FIRST_MEAN = 8                  # frames at rest of the first fit on a mean image after the first
 
 
 class RestSwitch:
@@ -85,7 +95,8 @@ class MeanCorrection:
         """
         Add a frame (mono image) and its fast detection (m, optical; px its image centre).
 
-        Return True when the accurate method is due: the frames summed are a power of two.
+        Return True when the accurate method is due: the first frame, and a power of two of
+        frames summed from FIRST_MEAN on.
         """
         px = np.asarray(px, dtype=float)
         if self.n and np.linalg.norm(px - self.px_sum / self.n) > self.motion_px:
@@ -96,7 +107,7 @@ class MeanCorrection:
         self.n += 1
         self.fast_sum += fast_position
         self.px_sum += px
-        return self.n & (self.n - 1) == 0
+        return self.n == 1 or (self.n >= FIRST_MEAN and self.n & (self.n - 1) == 0)
 
     def mean_image(self):
         """Return the mean of the frames summed (float32)."""
@@ -120,7 +131,7 @@ class RestCorrection:
     detections' method ('conic+model mean'). It must measure the ball it is seeded with, never
     search for one (detector.detect(search=False)): a fit of another ball would move every frame
     of the rest. ``every_frame``: the accurate method on every frame at rest instead (its own
-    detection published), as the node measured before MeanCorrection: log2(n) + 1 fits become n.
+    detection published), as the node measured before MeanCorrection: log2(n) - 1 fits become n.
     """
 
     def __init__(self, motion_px, frames, accurate, label, every_frame=False):
