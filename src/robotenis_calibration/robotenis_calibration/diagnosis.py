@@ -42,7 +42,7 @@ import functools
 import numpy as np
 from robotenis_kinematics import delta, effects, variance, workspace
 from robotenis_kinematics import identification as idf
-from scipy import stats
+from scipy.special import chdtrc, chdtri, ndtr, stdtr
 
 ALPHA = 0.01
 WORKSPACE_POSES = 200    # boundary poses over which the fit's FK uncertainty is reported
@@ -201,7 +201,7 @@ def score_test(result, meas, name, size=None):
     q = len(kept)
     if not q:
         return CandidateTest(name, (), dropped, 0.0, 0, 1.0, -np.inf, size)
-    return CandidateTest(name, kept, dropped, stat, q, float(stats.chi2.sf(stat, q)),
+    return CandidateTest(name, kept, dropped, stat, q, float(chdtrc(q, stat)),
                          wilson_hilferty(stat, q), size)
 
 
@@ -268,7 +268,7 @@ def _forward_selection(pool, most, error, width, alpha=ALPHA):
         trials = {n: error(_in_order(pool, chosen + (n,))) for n in left}
         n = min(trials, key=trials.get)
         q = max(width(n), 1)
-        if best - trials[n] <= stats.chi2.ppf(1 - alpha / len(left), q) - 2 * q:
+        if best - trials[n] <= chdtri(q, alpha / len(left)) - 2 * q:
             break
         chosen, best = _in_order(pool, chosen + (n,)), trials[n]
     return chosen
@@ -341,9 +341,19 @@ def correlations(model, meas, features):
             f = values[:, leg] if values.ndim == 2 else values
             if np.ptp(f) == 0:
                 continue
-            r, p = stats.pearsonr(f, r_w[:, leg])
-            out.append((fname, leg + 1, float(r), float(p)))
+            r, p = pearson(f, r_w[:, leg])
+            out.append((fname, leg + 1, r, p))
     return out
+
+
+def pearson(x, y):
+    """Return Pearson's r of x and y and its two-sided p-value (Student's t, n - 2 dof)."""
+    r = float(np.clip(np.corrcoef(x, y)[0, 1], -1.0, 1.0))
+    dof = len(x) - 2
+    if abs(r) == 1.0:
+        return r, 0.0
+    t = abs(r) * np.sqrt(dof / (1 - r * r))
+    return r, float(2 * stdtr(dof, -t))
 
 
 def residual_features(model, meas, sphere, stamps):
@@ -408,7 +418,7 @@ def holdout_test(result, floor, meas, R):
     r, J = idf.whitened_problem(result.model, floor.widen(meas, R), result.names)
     predictive = np.eye(len(r)) + J @ result.covariance @ J.T
     chi2 = float(r @ np.linalg.solve(predictive, r))
-    return chi2, len(r), float(stats.chi2.sf(chi2, len(r)))
+    return chi2, len(r), float(chdtrc(len(r), chi2))
 
 
 def holdout_confirmation(before, after, hold):
@@ -429,7 +439,7 @@ def holdout_confirmation(before, after, hold):
     d = r - idf.whitened_problem(after.model, hold, ())[0]
     w = np.linalg.solve(np.eye(len(r)) + J @ before.covariance @ J.T, d)
     spread = float(np.sqrt(max(d @ w, 0.0)))
-    return float(stats.norm.sf(w @ r / spread)) if spread > 0 else 1.0
+    return float(ndtr(-(w @ r) / spread)) if spread > 0 else 1.0
 
 
 class _Loop:
@@ -488,7 +498,7 @@ class _Loop:
         self.say(f'adding {best.name} ({", ".join(best.parameters)})')
         trial = self.fit(best)
         step.chi2_after = trial.chi2
-        step.lr_p_value = float(stats.chi2.sf(self.current.chi2 - trial.chi2, best.dof))
+        step.lr_p_value = float(chdtrc(best.dof, self.current.chi2 - trial.chi2))
         step.holdout_p_value = self.compare(self.current, trial)
         if not (step.lr_p_value < self.alpha and step.holdout_p_value < self.alpha):
             step.reason = 'rejected: no significant improvement ' + \

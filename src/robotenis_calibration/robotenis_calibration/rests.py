@@ -52,7 +52,7 @@ from robotenis_calibration.session import nearest_gap, Session
 from robotenis_kinematics import description
 from robotenis_ros.convert import joint_vector
 from robotenis_ros.names import JOINTS
-from scipy import stats
+from scipy.special import chdtr, chdtri, fdtri
 
 REQUIRED = {
     '/robot_description': 'std_msgs/msg/String',
@@ -72,7 +72,7 @@ SETTLE_LEVEL = 1e-3   # the pooled test that the frames have settled, per time b
 @functools.lru_cache(maxsize=None)
 def chi2_quantile(q, dof):
     """Return the chi-square quantile q of dof degrees of freedom (cached: the gates repeat)."""
-    return float(stats.chi2.ppf(q, dof))
+    return float(chdtri(dof, 1 - q))
 
 
 @dataclass(frozen=True)
@@ -335,7 +335,7 @@ def robust_mean(x, floor, alpha):
     """
     p = x.shape[1]
     gate = chi2_quantile(1 - alpha, p)
-    consistency = stats.chi2.cdf(gate, p + 2) / (1 - alpha)
+    consistency = chdtr(p + 2, gate) / (1 - alpha)
     center = np.median(x, axis=0)
     cov = np.diag(np.maximum((1.4826 * np.median(np.abs(x - center), axis=0)) ** 2, floor))
     d = x - center
@@ -368,7 +368,7 @@ def loo_gate(x, keep, center, cov, alpha):
     inside = np.minimum(d2, (n - 1) ** 2 / n * (1 - 1e-12))     # d^2 of a kept sample is below
     D2 = np.where(keep, (n - 2) * n ** 2 * inside / ((n - 1) * ((n - 1) ** 2 - n * inside)), d2)
     m = np.where(keep, n - 1, n)
-    gate = p * (m - 1) / (m - p) * (m + 1) / m * stats.f.ppf(1 - alpha, p, m - p)
+    gate = p * (m - 1) / (m - p) * (m + 1) / m * fdtri(p, m - p, 1 - alpha)
     return D2 <= gate
 
 
