@@ -45,6 +45,25 @@ def byte_order(data):
     return '<' if data[1] == 1 else '>'
 
 
+def mono8_pixels(data, encoding, height, width, step):
+    """
+    Return the (height, width) uint8 view of an image's rows of ``step`` bytes in ``data``.
+
+    Raises
+    ------
+    ValueError
+        if the encoding is not mono8 or the data is shorter than the image.
+
+    """
+    if encoding not in MONO8:
+        raise ValueError(f'image encoding {encoding!r} is not mono8')
+    if step < width or len(data) < step * height:
+        raise ValueError(f'image data too short for {width}x{height} (step {step}, '
+                         f'{len(data)} bytes)')
+    rows = np.frombuffer(data, dtype=np.uint8, count=step * height)
+    return rows.reshape(height, step)[:, :width]
+
+
 @dataclass(frozen=True)
 class Image:
     """A sensor_msgs/Image's stamp, frame and mono8 pixels (a read-only view of its bytes)."""
@@ -62,8 +81,7 @@ def image(data):
     Raises
     ------
     ValueError
-        if the bytes are not an Image's, the encoding is not mono8 or the data is shorter than
-        the image (the messages of ``robotenis_ros.convert.image_array``).
+        if the bytes are not an Image's, or from ``mono8_pixels``.
 
     """
     order = byte_order(data)
@@ -77,10 +95,5 @@ def image(data):
         size, pos = uint32(data, pos, order)
     except (ValueError, struct.error, UnicodeDecodeError) as e:
         raise ValueError(f'not a serialized sensor_msgs/Image ({e})') from None
-    if encoding not in MONO8:
-        raise ValueError(f'image encoding {encoding!r} is not mono8')
-    if step < width or min(size, len(data) - pos) < step * height:
-        raise ValueError(f'image data too short for {width}x{height} (step {step}, '
-                         f'{min(size, len(data) - pos)} bytes)')
-    rows = np.frombuffer(data, dtype=np.uint8, count=step * height, offset=pos)
-    return Image(sec, nanosec, frame_id, rows.reshape(height, step)[:, :width])
+    pixels = mono8_pixels(memoryview(data)[pos:pos + size], encoding, height, width, step)
+    return Image(sec, nanosec, frame_id, pixels)

@@ -8,7 +8,7 @@ import array
 
 from geometry_msgs.msg import PointStamped, TwistStamped
 import numpy as np
-from robotenis_ros.cdr import MONO8
+from robotenis_ros.cdr import mono8_pixels
 from robotenis_ros.names import JOINTS
 from sensor_msgs.msg import CameraInfo, Image, JointState
 
@@ -76,13 +76,7 @@ def image_array(msg):
         if the encoding is not mono8 or the data is shorter than the image.
 
     """
-    if msg.encoding not in MONO8:
-        raise ValueError(f'image encoding {msg.encoding!r} is not mono8')
-    if msg.step < msg.width or len(msg.data) < msg.step * msg.height:
-        raise ValueError(f'image data too short for {msg.width}x{msg.height} '
-                         f'(step {msg.step}, {len(msg.data)} bytes)')
-    rows = np.frombuffer(bytes(msg.data), dtype=np.uint8, count=msg.step * msg.height)
-    return rows.reshape(msg.height, msg.step)[:, :msg.width]
+    return mono8_pixels(bytes(msg.data), msg.encoding, msg.height, msg.width, msg.step)
 
 
 def image_message(pixels, header):
