@@ -27,8 +27,8 @@ stays whole. Parameters: the table PARAMETERS.
 
 The node runs on the EventsExecutor (robotenis_ros.node.spin): it takes every joint state, 1 kHz
 of simulated time, as bytes, recorded as they are and their positions read from them
-(cdr_arrays.JointStateDecoder). The service is a robotenis_ros.node.DeferredService: a request
-starts the session, and the timer that drives it answers when it is over.
+(robotenis_ros.cdr.JointStateReader). The service is a robotenis_ros.node.DeferredService: a
+request starts the session, and the timer that drives it answers when it is over.
 """
 import array
 import math
@@ -41,11 +41,12 @@ import numpy as np
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.serialization import deserialize_message, serialize_message
-from robotenis_calibration import bag_io, cdr_arrays, pipeline, poses, session_limits
+from robotenis_calibration import bag_io, pipeline, poses, session_limits
 from robotenis_calibration.session_runner import DONE, MEASURING, RunnerConfig, SessionRunner
 from robotenis_interfaces.msg import CalibrationProgress, RestMarker, SphereDetection
 from robotenis_interfaces.srv import Calibrate
 from robotenis_kinematics import description
+from robotenis_ros import cdr
 from robotenis_ros.convert import image_array, point_stamped, xyz
 from robotenis_ros.names import BASE_FRAME, JOINTS
 from robotenis_ros.node import declare_parameters, DeferredService, LATCHED, spin
@@ -107,7 +108,7 @@ class CalibrationNode(Node):
         self.writer = None
         self.session = None             # the request being served: see start_session
         self.images_kept = {}           # pose index -> images recorded during its rest
-        self.joints = cdr_arrays.JointStateDecoder(JOINTS)
+        self.joints = cdr.JointStateReader(JOINTS)
         self.goal_pub = self.create_publisher(PointStamped, 'goal', 10)
         self.progress_pub = self.create_publisher(CalibrationProgress, 'calibration/progress', 10)
         self.rest_pub = self.create_publisher(RestMarker, 'calibration/rest', 10)
@@ -141,9 +142,9 @@ class CalibrationNode(Node):
         stamp_ns = self.stamp_ns()
         self.record('joint_states', data, stamp_ns)
         if self.runner is not None:
-            Theta = self.joints.positions(data)
-            if Theta is not None:
-                self.runner.joint_state(stamp_ns * 1e-9, Theta)
+            reading = self.joints.read(data)
+            if reading is not None and reading[2] is not None:
+                self.runner.joint_state(stamp_ns * 1e-9, reading[2])
 
     def on_detection(self, data):
         """Record a sphere detection as it arrived; feed it to the runner."""

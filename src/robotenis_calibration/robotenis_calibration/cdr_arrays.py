@@ -13,7 +13,7 @@ CDR: robotenis_ros.cdr.
 import struct
 
 import numpy as np
-from robotenis_ros.cdr import align, byte_order, HEADER, STAMP, string, uint32
+from robotenis_ros.cdr import align, byte_order, joint_state_layout, STAMP, string
 
 
 def point_layout(data):
@@ -21,19 +21,6 @@ def point_layout(data):
     order = byte_order(data)
     _, pos = string(data, STAMP.stop, order)                  # header.frame_id
     return align(pos, 8), order
-
-
-def joint_state_layout(data):
-    """Return (names, offset of the positions, number of positions, byte order) of a JointState."""
-    order = byte_order(data)
-    _, pos = string(data, STAMP.stop, order)                  # header.frame_id
-    count, pos = uint32(data, pos, order)
-    names = []
-    for _ in range(count):
-        name, pos = string(data, pos, order)
-        names.append(name)
-    n, pos = uint32(data, pos, order)
-    return tuple(names), (align(pos, 8) if n else pos), n, order
 
 
 def _groups(datas):
@@ -94,9 +81,10 @@ def joint_positions(datas, joints):
     seen = set()
     for index, buf in _groups(datas):
         try:
-            names, offset, n, order = joint_state_layout(bytes(buf[0]))
-        except (ValueError, struct.error, UnicodeDecodeError):
+            layout = joint_state_layout(bytes(buf[0]))
+        except ValueError:
             continue
+        names, order, (offset, n) = layout.names, layout.order, layout.arrays['position']
         seen.add(names)
         if n != len(names) or offset + 8 * n > buf.shape[1] or not set(joints) <= set(names):
             continue
@@ -107,42 +95,3 @@ def joint_positions(datas, joints):
         values[rows] = _doubles(buf[same], offset, n, order)[:, columns]
         ok[rows] = True
     return stamps, values, ok, seen
-
-
-class JointStateDecoder:
-    """
-    The positions of ``joints`` from one JointState's CDR bytes at a time, as a node takes them.
-
-    The layout (byte order, names, where the positions start) is read once per message length and
-    reused while a message's bytes other than its stamp and its numbers are the same; any other
-    message is read afresh. A few us a message, against about 17 us for rclpy's deserialization
-    and picking the joints by name.
-    """
-
-    def __init__(self, joints):
-        self.joints = tuple(joints)
-        self._layouts = {}      # length -> (encapsulation, bytes from stamp to positions, ...)
-
-    def positions(self, data):
-        """Return the positions of the joints (tuple of floats); None if one is missing."""
-        layout = self._layouts.get(len(data))
-        if layout is None or data[:HEADER] != layout[0] \
-                or data[STAMP.stop:layout[2]] != layout[1]:
-            layout = self._learn(bytes(data))
-            if layout is None:
-                return None
-        _, _, offset, fmt, columns = layout
-        values = struct.unpack_from(fmt, data, offset)
-        return tuple(values[c] for c in columns)
-
-    def _learn(self, data):
-        try:
-            names, offset, n, order = joint_state_layout(data)
-        except (ValueError, struct.error, UnicodeDecodeError):
-            return None
-        if n != len(names) or offset + 8 * n > len(data) or not set(self.joints) <= set(names):
-            return None
-        layout = (data[:HEADER], data[STAMP.stop:offset], offset, f'{order}{n}d',
-                  [names.index(j) for j in self.joints])
-        self._layouts[len(data)] = layout
-        return layout

@@ -10,7 +10,7 @@ from geometry_msgs.msg import PointStamped, TwistStamped
 import numpy as np
 from robotenis_ros.cdr import mono8_pixels
 from robotenis_ros.names import JOINTS
-from sensor_msgs.msg import CameraInfo, Image, JointState
+from sensor_msgs.msg import CameraInfo, Image
 
 
 def stamp_seconds(stamp):
@@ -53,17 +53,6 @@ def joint_vector(msg, field, joints=JOINTS):
     if any(j not in index for j in joints):
         return None
     return np.array([values[index[j]] for j in joints], dtype=float)
-
-
-def joint_state(stamp, position=None, velocity=None, joints=JOINTS):
-    """Build a sensor_msgs/JointState of ``joints`` with the given positions and velocities."""
-    msg = JointState(name=list(joints))
-    msg.header.stamp = stamp
-    if position is not None:
-        msg.position = [float(v) for v in position]
-    if velocity is not None:
-        msg.velocity = [float(v) for v in velocity]
-    return msg
 
 
 def image_array(msg):

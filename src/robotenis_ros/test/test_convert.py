@@ -25,13 +25,6 @@ def test_joint_vector_reads_the_motors_in_any_order():
                                   [1.0, 2.0, 3.0])
 
 
-def test_joint_state_round_trip():
-    stamp = TimeMsg(sec=3, nanosec=5)
-    msg = convert.joint_state(stamp, position=[0.1, 0.2, 0.3], velocity=np.array([1.0, 2.0, 3.0]))
-    assert list(msg.name) == ['motor_1', 'motor_2', 'motor_3'] and msg.header.stamp == stamp
-    np.testing.assert_array_equal(convert.joint_vector(msg, 'velocity'), [1.0, 2.0, 3.0])
-
-
 def test_point_and_twist_carry_their_frame_and_stamp():
     stamp = TimeMsg(sec=1, nanosec=2)
     p = convert.point_stamped(np.array([0.1, -0.2, 0.3]), stamp, 'base')

@@ -22,20 +22,23 @@ longer than a frame, so a simulator faster than real time would run ahead of it,
 it to drop and simulated time for every node to spend (1.9 s of simulated time per rest instead
 of 0.6 s), and the session's time-outs, in simulated time, would skip poses it had not measured
 yet. Every node on /clock pays for each clock message (about 0.1 ms in rclpy): 250 Hz is enough
-for the nodes' timers and costs a quarter of 1 kHz.
+for the nodes' timers and costs a quarter of 1 kHz. The joint states and the commands, 1 kHz each
+way in lockstep, are written and read as CDR bytes (robotenis_ros.cdr): the lockstep round trip
+is what bounds a session's simulated time per wall second.
 """
 import sys
 
+from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped, TwistStamped
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.time import Time
 from robotenis_control.dynamics import MassParameters
 from robotenis_kinematics import description
 from robotenis_kinematics.description import DescriptionError
-from robotenis_ros.convert import joint_state, joint_vector, point_stamped, stamp_seconds
-from robotenis_ros.names import BASE_FRAME
+from robotenis_ros import cdr
+from robotenis_ros.convert import point_stamped, stamp_seconds
+from robotenis_ros.names import BASE_FRAME, JOINTS
 from robotenis_ros.node import declare_parameters, spin
 from robotenis_sim import lockstep, motors, truth as sim_truth
 from robotenis_sim.motors import true_masses
@@ -102,7 +105,9 @@ class SimMotorsNode(Node):
         self.truth_pub = self.create_publisher(PointStamped, 'sim/effector_position', 100)
         self.clock_pub = (self.create_publisher(ClockMsg, '/clock', 10) if self.publish_clock
                           else None)
-        self.create_subscription(JointState, 'motor_velocity_cmd', self.on_command, 10)
+        self.readings = cdr.JointStateWriter(JOINTS)
+        self.commands = cdr.JointStateReader(JOINTS)
+        self.create_subscription(JointState, 'motor_velocity_cmd', self.on_command, 10, raw=True)
         if p['visual_answer'] not in VISUAL_ANSWERS:
             raise ValueError(f"visual_answer must be one of {', '.join(VISUAL_ANSWERS)}, "
                              f"got {p['visual_answer']!r}")
@@ -134,22 +139,24 @@ class SimMotorsNode(Node):
                 sim_truth.JointReadings(truth) if joint else None)
 
     def stamp(self):
+        """Return the time of the reading (sec, nanosec): simulated, or the node's clock."""
         if self.publish_clock:
-            return Time(nanoseconds=int(round(self.sim.t * 1e9))).to_msg()
-        return self.get_clock().now().to_msg()
+            return divmod(int(round(self.sim.t * 1e9)), 1_000_000_000)
+        return self.get_clock().now().seconds_nanoseconds()
 
-    def on_command(self, msg):
-        velocity = joint_vector(msg, 'velocity')
-        if velocity is None:
+    def on_command(self, data):
+        command = self.commands.read(data)
+        if command is None or command[3] is None:
             self.get_logger().error('motor_velocity_cmd without velocities of motor_1..3',
                                     throttle_duration_sec=1.0)
             return
+        sec, nanosec, _, velocity = command
         try:
             self.sim.set_command(velocity)
         except ValueError as e:
             self.get_logger().error(str(e), throttle_duration_sec=1.0)
             return
-        if self.schedule.p.lockstep and msg.header.stamp == self.last_stamp:
+        if self.schedule.p.lockstep and (sec, nanosec) == self.last_stamp:
             self.schedule.answer()
             self.on_timer()             # step at once: lockstep runs as fast as the two nodes can
 
@@ -170,14 +177,14 @@ class SimMotorsNode(Node):
             self.publish_reading(reading)
 
     def publish_reading(self, reading):
-        stamp = self.stamp()
+        sec, nanosec = self.last_stamp = self.stamp()
         if self.clock_pub is not None and self.steps % self.clock_decimation == 0:
-            self.clock_pub.publish(ClockMsg(clock=stamp))
+            self.clock_pub.publish(ClockMsg(clock=Time(sec=sec, nanosec=nanosec)))
         Theta, dTheta = reading
-        self.last_stamp = stamp
         self.schedule.published()
-        self.joint_pub.publish(joint_state(stamp, position=Theta, velocity=dTheta))
+        self.joint_pub.publish(self.readings(sec, nanosec, position=Theta, velocity=dTheta))
         if self.steps % self.truth_decimation == 0:
+            stamp = Time(sec=sec, nanosec=nanosec)
             self.schedule.sampled(stamp_seconds(stamp))
             self.truth_pub.publish(point_stamped(self.sim.effector()[0], stamp, BASE_FRAME))
 

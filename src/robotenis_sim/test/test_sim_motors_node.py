@@ -4,9 +4,9 @@ import time
 from geometry_msgs.msg import TwistStamped
 import pytest
 import rclpy
+from robotenis_ros.cdr import JointStateWriter
 from robotenis_ros.names import JOINTS
 from robotenis_sim.sim_motors_node import SimMotorsNode
-from sensor_msgs.msg import JointState
 
 DELAY, TIMEOUT = 1.0 / 120.0, 0.05
 
@@ -27,10 +27,9 @@ def node():
 
 def controller_answers(node, steps):
     """Answer the last reading ``steps`` times as the controller does; return the sim time."""
+    command = JointStateWriter(JOINTS, ('velocity',))
     for _ in range(steps):
-        msg = JointState(name=list(JOINTS), velocity=[0.0, 0.0, 0.0])
-        msg.header.stamp = node.last_stamp
-        node.on_command(msg)
+        node.on_command(command(*node.last_stamp, velocity=(0.0, 0.0, 0.0)))
     return node.sim.t
 
 
