@@ -99,6 +99,9 @@ def test_sim_time_puts_the_simulator_and_the_visual_loop_in_lockstep():
     # a calibration session waits for the detector at rest; the tracking loop for its commands
     assert calibration['sim_motors']['visual_answer'] == 'detection'
     assert calibration['sim_motors']['visual_rest_speed'] > 0
+    # the frames the simulator may run ahead at rest fit in the detector's queue
+    ahead = calibration['sim_motors']['visual_delay'] * calibration['sim_motors']['camera_rate']
+    assert calibration['sphere_detector']['image_queue'] > ahead
     assert nodes['sim_motors']['visual_answer'] == 'command'
     # the tracked ball stands still in the image: no slow fit at rest inside the 1/120 s loop
     assert nodes['sphere_detector']['rest_method'] == 'conic'
@@ -111,6 +114,7 @@ def test_sim_time_puts_the_simulator_and_the_visual_loop_in_lockstep():
 @pytest.mark.parametrize('argument, package, executable, parameter', [
     ('rest_method', 'robotenis_vision', 'sphere_detector', 'rest_method'),
     ('search_interval', 'robotenis_vision', 'sphere_detector', 'search_interval'),
+    ('image_queue', 'robotenis_vision', 'sphere_detector', 'image_queue'),
     ('visual_answer', 'robotenis_sim', 'sim_motors', 'visual_answer'),
     ('visual_delay', 'robotenis_sim', 'sim_motors', 'visual_delay'),
     ('visual_timeout', 'robotenis_sim', 'sim_motors', 'visual_timeout'),

@@ -25,7 +25,7 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PointStamped
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from robotenis_interfaces.msg import SphereDetection
 from robotenis_kinematics import description
 from robotenis_ros import cdr
@@ -53,6 +53,9 @@ PARAMETERS = {
     'use_prior': (True, "the previous frame's detection seeds the next one (about half the time "
                         'at rest), moved at the velocity of the two last ones; the whole image '
                         'is searched when it does not fit'),
+    'image_queue': (qos_profile_sensor_data.depth, 'frames kept for the node while it is busy '
+                                                   '(sensor-data QoS of this depth; older ones '
+                                                   'are dropped)'),
     'search_interval': (0.2, 's of image time: once the ball is lost, the whole image is searched '
                              'again after this long, the frames between left unmeasured (a '
                              'search that finds nothing took 85-120 ms here in a live session: on '
@@ -107,8 +110,11 @@ class SphereDetectorNode(Node):
         self.detection_pub = self.create_publisher(SphereDetection, 'sphere/detection', 10)
         self.create_subscription(CameraInfo, 'camera/camera_info', self.on_camera_info,
                                  qos_profile_sensor_data)
-        self.create_subscription(Image, 'camera/image_raw', self.on_image, qos_profile_sensor_data,
-                                 raw=True)
+        images = QoSProfile(history=qos_profile_sensor_data.history,
+                            depth=max(1, int(p['image_queue'])),
+                            reliability=qos_profile_sensor_data.reliability,
+                            durability=qos_profile_sensor_data.durability)
+        self.create_subscription(Image, 'camera/image_raw', self.on_image, images, raw=True)
         self.get_logger().info(f'sphere radius {self.radius * 1e3:.2f} mm, method {self.method}'
                                f"{', at rest ' + self.rest_method if self.rest_method else ''}, "
                                f'{self.frames} frame(s) per measurement')
