@@ -3,9 +3,10 @@ The calibration session as a state machine, fed with time and measurements, free
 
 For each planned pose, in order: command it, wait until the joints are still, wait the settle time
 (vibrations of the robot and the ball's holder), then average resolver readings and sphere
-detections until enough frames are in; a pose whose ball is not seen within a time-out is skipped
-with the reason. After ``replan_after`` measured rests the poses still to come may be replaced
-(``replan``: the ball is then known from those rests, not from the user's rough guess). An input
+detections until enough frames are in; a pose whose ball is not seen within a time-out, or whose
+detections stop (a ball at the edge of the view), is skipped with the reason. After
+``replan_after`` measured rests the poses still to come may be replaced (``replan``: the ball is
+then known from those rests, not from the user's rough guess). An input
 silent for longer than a pose can last (robotenis_calibration.session_limits) stops the session:
 ``failure`` then says which, and the session is done without its remaining poses. The
 calibration node feeds it messages and executes the actions it returns.
@@ -104,6 +105,8 @@ class RunnerConfig:
     # s a rest may take beyond its frames' own time at the detections' rate before it is skipped
     measure_timeout: float = 10.0
     no_ball_time: float = 0.5          # s without a single detection: ball not in view, skip
+    # A rest's detections that stop for no_ball_time plus two of their periods: the ball flickers
+    # at the edge of the view (seen in 1 of 30 frames), skip rather than wait for measure_timeout
 
 
 class SessionRunner:
@@ -132,6 +135,7 @@ class SessionRunner:
         self._t_state = None
         self._window = SlidingRange(config.still_time)   # the last still_time while moving
         self._rest = None
+        self._last_detection = None       # (robot, wall) time of the rest's last detection
         self._measured = [0, 0.0]         # frames and seconds of the rests measured so far
 
     @property
@@ -186,6 +190,7 @@ class SessionRunner:
         """Take one sphere detection, in the optical frame (m), with its covariance (3x3, m^2)."""
         self._heard('sphere/detection', t)
         if self.state == MEASURING and np.all(np.isfinite(position)):
+            self._last_detection = (t, self._wall())
             self._rest.sphere.append(np.asarray(position, dtype=float))
             self._rest.sphere_cov.append(np.asarray(covariance, dtype=float).reshape(3, 3))
 
@@ -215,6 +220,13 @@ class SessionRunner:
                                                  ' (ball not in view?)'))
                 self.actions.append(('rest_end', self.index))
                 self._next_pose(t)
+            elif (self._rest.sphere and self._elapsed(t, *self._last_detection)
+                  > c.no_ball_time + 2 * self._frame_period()):
+                self.skipped.append((self.index,
+                                     f'detections stopped after {len(self._rest.sphere)} of '
+                                     f'{c.frames_per_pose} (ball at the edge of the view?)'))
+                self.actions.append(('rest_end', self.index))
+                self._next_pose(t)
             elif t - self._t_state > self._measure_limit(t):
                 self.skipped.append((self.index,
                                      f'only {len(self._rest.sphere)} of {c.frames_per_pose} '
@@ -240,6 +252,13 @@ class SessionRunner:
         self._enter(DONE, t)
         self.actions.append(('done', None))
         return True
+
+    def _frame_period(self):
+        """Return the seconds between detections: over the rests measured, or this one's."""
+        frames, seconds = self._measured
+        if not frames:
+            frames, seconds = len(self._rest.sphere), self._last_detection[0] - self._t_state
+        return seconds / frames
 
     def _measure_limit(self, t):
         """

@@ -68,7 +68,8 @@ def test_a_slow_camera_gets_the_time_its_frames_need():
     """
     50 frames at 5 Hz take 10 s: longer than measure_timeout, which is time beyond the frames'.
 
-    A rest whose detections then stop is skipped once that extra time is over.
+    A rest whose detections then stop is skipped once they have been silent for no_ball_time and
+    two of their periods (0.2 s), not after the whole measure_timeout.
     """
     poses = np.array([[0.1, 0, 1.0], [0.2, 0, 1.0], [0.3, 0, 1.0]])
     config = RunnerConfig(frames_per_pose=50, settle_time=0.1, measure_timeout=2.0)
@@ -76,11 +77,25 @@ def test_a_slow_camera_gets_the_time_its_frames_need():
     actions = drive(runner, lambda k: True, t_end=60.0, frame_ms=200, detector_until=23.0)
     assert [r.index for r in runner.rests] == [0, 1]
     assert all(len(r.sphere) == 50 for r in runner.rests)
-    assert runner.skipped[0][0] == 2 and 'only' in runner.skipped[0][1]
-    start = next(t for t, a in actions if a == ('rest_start', 2))
+    assert runner.skipped[0][0] == 2 and 'detections stopped' in runner.skipped[0][1]
     end = next(t for t, a in actions if a == ('rest_end', 2))
-    own = config.frames_per_pose * np.mean([r.end - r.start for r in runner.rests]) / 50
-    assert abs(end - start - (config.measure_timeout + own)) < 0.01
+    last = max(t for t in np.arange(0.0, 23.0, 0.001) if round(t * 1000) % 200 == 0)
+    period = np.mean([r.end - r.start for r in runner.rests]) / 50
+    assert abs(end - last - (config.no_ball_time + 2 * period)) < 0.01
+
+
+def test_a_rest_whose_detections_stop_is_skipped_at_once():
+    """A ball at the edge of the view seen in its rest's first frames only: skipped, not waited."""
+    poses = np.array([[0.1, 0, 1.0], [0.2, 0, 1.0]])
+    config = RunnerConfig(frames_per_pose=30, settle_time=0.1, measure_timeout=10.0)
+    runner = SessionRunner(poses, config)
+    actions = drive(runner, lambda k: k == 1 or (runner.state == MEASURING
+                                                 and len(runner._rest.sphere) < 3))
+    assert [r.index for r in runner.rests] == [1]
+    assert runner.skipped[0][0] == 0 and 'detections stopped after 3 of 30' in runner.skipped[0][1]
+    start = next(t for t, a in actions if a == ('rest_start', 0))
+    end = next(t for t, a in actions if a == ('rest_end', 0))
+    assert end - start < 1.0 < config.measure_timeout
 
 
 def test_no_measurement_while_moving():
