@@ -47,7 +47,7 @@ from robotenis_interfaces.msg import CalibrationProgress, RestMarker, SphereDete
 from robotenis_interfaces.srv import Calibrate
 from robotenis_kinematics import description
 from robotenis_ros import cdr
-from robotenis_ros.convert import image_array, point_stamped, xyz
+from robotenis_ros.convert import image_array, point_stamped, stamp_seconds, xyz
 from robotenis_ros.names import BASE_FRAME, JOINTS
 from robotenis_ros.node import declare_parameters, DeferredService, LATCHED, spin
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
@@ -153,7 +153,8 @@ class CalibrationNode(Node):
         if self.runner is not None:
             msg = deserialize_message(data, SphereDetection)
             self.runner.detection(stamp_ns * 1e-9, xyz(msg.position),
-                                  np.reshape(msg.covariance, (3, 3)))
+                                  np.reshape(msg.covariance, (3, 3)),
+                                  stamp_seconds(msg.header.stamp))
 
     def watch_images(self, on):
         """Subscribe to the camera images (``on``) or stop taking them."""

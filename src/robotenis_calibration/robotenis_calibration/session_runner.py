@@ -186,10 +186,18 @@ class SessionRunner:
         elif self.state == MEASURING:
             self._rest.Theta.append(np.asarray(Theta, dtype=float))
 
-    def detection(self, t, position, covariance):
-        """Take one sphere detection, in the optical frame (m), with its covariance (3x3, m^2)."""
+    def detection(self, t, position, covariance, stamp=None):
+        """
+        Take one sphere detection, in the optical frame (m), with its covariance (3x3, m^2).
+
+        ``stamp``: its image's time (s), if known. A frame exposed before the rest began is not
+        the rest's, whenever its detection arrives: the calibration reads the rests from the bag by
+        the images' stamps (robotenis_calibration.rests), and a detector a few frames behind would
+        otherwise end a rest with fewer frames in it than asked.
+        """
         self._heard('sphere/detection', t)
-        if self.state == MEASURING and np.all(np.isfinite(position)):
+        if (self.state == MEASURING and np.all(np.isfinite(position))
+                and (stamp is None or stamp >= self._rest.start)):
             self._last_detection = (t, self._wall())
             self._rest.sphere.append(np.asarray(position, dtype=float))
             self._rest.sphere_cov.append(np.asarray(covariance, dtype=float).reshape(3, 3))

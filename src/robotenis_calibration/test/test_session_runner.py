@@ -98,6 +98,23 @@ def test_a_rest_whose_detections_stop_is_skipped_at_once():
     assert end - start < 1.0 < config.measure_timeout
 
 
+def test_a_rest_counts_the_frames_exposed_in_it_whenever_they_arrive():
+    """Detections of frames from before the rest (a detector behind) are not the rest's."""
+    runner = SessionRunner(np.zeros((1, 3)), RunnerConfig(frames_per_pose=3, settle_time=0.1))
+    runner.start(0.0)
+    t = 0.0
+    while runner.state != MEASURING:
+        t += 0.001
+        runner.joint_state(t, np.zeros(3))
+        runner.tick(t)
+    start = t
+    for k, stamp in enumerate([start - 0.02, start - 0.01, start, start + 0.008]):
+        runner.detection(start + 0.05 + 0.001 * k, np.ones(3), np.eye(3), stamp)
+    assert len(runner._rest.sphere) == 2
+    runner.detection(start + 0.06, np.ones(3), np.eye(3))      # no stamp: counted on arrival
+    assert len(runner._rest.sphere) == 3
+
+
 def test_no_measurement_while_moving():
     runner = SessionRunner(np.zeros((1, 3)), RunnerConfig(frames_per_pose=5, settle_time=0.2))
     runner.start(0.0)

@@ -12,10 +12,10 @@ Ticks come from a timer at ``rate`` (wall clock, or /clock with use_sim_time), o
 ``tick_on_joint_states``, from every joint reading (lockstep with a simulator; the command then
 carries the reading's stamp, and the node's time, for goals and velocity commands too, is the
 last reading's stamp: it needs no /clock). The joint states and the commands are read and written
-as CDR bytes (robotenis_ros.cdr): at 1 kHz in lockstep, rclpy's messages cost the round trip about
-a third more. The description is reloaded by the
-~/reload_description service (std_srvs/Trigger: reads description_path again) or by setting
-description_path.
+as CDR bytes (robotenis_ros.cdr): at 1 kHz in lockstep, rclpy's messages took each side about 1.8x
+the CPU and the round trip twice the wall time (``./robotenis bench transport``). The description
+is reloaded by the ~/reload_description service (std_srvs/Trigger: reads description_path again)
+or by setting description_path.
 """
 import sys
 
