@@ -303,10 +303,8 @@ class CalibrationNode(Node):
             raise ValueError(f'request refused, nothing was moved: {refused}')
         rng = np.random.default_rng(request.seed)
         max_range = self.get_parameter('max_range').value
-        replans = self.get_parameter('replan').value
-        # from the rough guess, aim near the image centre until the first rests show the ball
         planned = poses.select(request.pose_selection or 'boundary', declared, guess, n, rng,
-                               max_range, poses.GUESS_FIELD if replans else 1.0)
+                               max_range)
         stamp = time.strftime('%Y%m%d-%H%M%S')
         bag = request.bag_path or os.path.join(self.get_parameter('bags_dir').value,
                                                f'session-{stamp}')
@@ -335,7 +333,7 @@ class CalibrationNode(Node):
 
         self.session = SimpleNamespace(request=request, answer=answer, planned=planned, bag=bag,
                                        result_path=result_path)
-        on_replan = replan if replans else None
+        on_replan = replan if self.get_parameter('replan').value else None
         # The wall clock too: on simulated time a detector's silence must also be the wall's.
         self.runner = SessionRunner(planned, config, on_replan, clock=time.monotonic)
         self.runner.start(self.now())

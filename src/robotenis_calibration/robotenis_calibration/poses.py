@@ -5,11 +5,7 @@ The planner knows only what a real system knows: the declared description and a 
 where the ball is (base frame, a few cm). It predicts the ball in the camera with the declared
 camera rotation and no camera offset, so it keeps wide margins; rests that still miss the ball are
 skipped. Once a few rests are measured, ``refined_guess`` puts the ball where they saw it, and the
-session plans the rest of its poses with that (SessionRunner's ``replan``). Until then it aims
-within GUESS_FIELD of the usable field (``field``): a guess a few cm off, and the camera offset,
-move the ball by about a fifth of the range across the image (on the simulated robot, from the
-calibration launch's guess: a quarter of 90 poses planned over the whole field had the ball cut
-by the image border or out of it, and 1 % within 0.7 of the field; each costs a move and a wait).
+session plans the rest of its poses with that (SessionRunner's ``replan``).
 
 * ``boundary``: the paper's way -- random poses 5-10 cm from a singularity (section 5.1).
 * ``optimal``: a D-optimal design: from visible candidates, greedily add the pose that most
@@ -36,7 +32,6 @@ from robotenis_kinematics import identification as idf
 PLAN_RANGE = (0.20, 0.55)      # m along the optical axis: inside the detector's 0.15-0.60
 IMAGE_MAX_RANGE = 0.40         # m: the farthest for a session measured through the detector
 PLAN_HALF_FIELD = (0.45, 0.33)  # tan of the usable half field of view, x, y (640x480, f = 500 px)
-GUESS_FIELD = 0.5              # share of it the poses planned from the user's rough guess aim in
 SELECTIONS = ('boundary', 'optimal')
 
 
@@ -58,20 +53,15 @@ def refined_guess(declared, Theta, sphere):
     return np.median(P + np.asarray(sphere, dtype=float) @ declared.camera_rotation.T, axis=0)
 
 
-def plannable(declared, sphere_guess, P, max_range=PLAN_RANGE[1], field=1.0):
-    """
-    Mask of positions whose predicted ball lies well inside the range and field of view.
-
-    ``field``: the share of PLAN_HALF_FIELD the ball must lie within (GUESS_FIELD for a guess).
-    """
+def plannable(declared, sphere_guess, P, max_range=PLAN_RANGE[1]):
+    """Mask of positions whose predicted ball lies well inside the range and field of view."""
     x, y, z = predicted_sphere(declared, sphere_guess, P).T
-    half_x, half_y = field * PLAN_HALF_FIELD[0], field * PLAN_HALF_FIELD[1]
-    return (z >= PLAN_RANGE[0]) & (z <= max_range) & (np.abs(x) <= half_x * z) \
-        & (np.abs(y) <= half_y * z)
+    return (z >= PLAN_RANGE[0]) & (z <= max_range) & (np.abs(x) <= PLAN_HALF_FIELD[0] * z) \
+        & (np.abs(y) <= PLAN_HALF_FIELD[1] * z)
 
 
 def visible_candidates(declared, sphere_guess, n, rng, band=None, batch=20000, max_batches=200,
-                       max_range=PLAN_RANGE[1], field=1.0):
+                       max_range=PLAN_RANGE[1]):
     """Draw ``n`` random workspace positions (n, 3) the camera should see, else ValueError."""
     if not PLAN_RANGE[0] < max_range:
         raise ValueError(f'max_range: must exceed the nearest planned range {PLAN_RANGE[0]} m, '
@@ -79,7 +69,7 @@ def visible_candidates(declared, sphere_guess, n, rng, band=None, batch=20000, m
     out, count = [], 0
     for _ in range(max_batches):
         P = workspace.sample(declared, batch, rng, band=band)
-        P = P[plannable(declared, sphere_guess, P, max_range, field)]
+        P = P[plannable(declared, sphere_guess, P, max_range)]
         out.append(P)
         count += len(P)
         if count >= n:
@@ -88,17 +78,16 @@ def visible_candidates(declared, sphere_guess, n, rng, band=None, batch=20000, m
                      "move the ball into the camera's reach")
 
 
-def boundary(declared, sphere_guess, n, rng, max_range=PLAN_RANGE[1], field=1.0):
+def boundary(declared, sphere_guess, n, rng, max_range=PLAN_RANGE[1]):
     """Select the paper's poses: random, visible, 5-10 cm from a singularity."""
     return visible_candidates(declared, sphere_guess, n, rng, band=(0.05, 0.10),
-                              max_range=max_range, field=field)
+                              max_range=max_range)
 
 
 def optimal(declared, sphere_guess, n, rng, pool_size=3000, seed_poses=20,
-            max_range=PLAN_RANGE[1], field=1.0):
+            max_range=PLAN_RANGE[1]):
     """Pick D-optimal poses (greedy log det of the 15-parameter information matrix), shuffled."""
-    pool = visible_candidates(declared, sphere_guess, pool_size, rng, max_range=max_range,
-                              field=field)
+    pool = visible_candidates(declared, sphere_guess, pool_size, rng, max_range=max_range)
     meas = synthetic.measure(declared, pool)
     model = synthetic.true_model(declared)
     _, J = idf.whitened_problem(model, meas, idf.PAPER_PARAMETERS)
@@ -119,13 +108,9 @@ def optimal(declared, sphere_guess, n, rng, pool_size=3000, seed_poses=20,
     return pool[rng.permutation(chosen)]
 
 
-def select(method, declared, sphere_guess, n, rng, max_range=PLAN_RANGE[1], field=1.0):
-    """
-    Select poses by name ('boundary' or 'optimal'), the ball at most ``max_range`` (m) away.
-
-    ``field``: the share of the usable field the predicted ball lies in (see ``plannable``).
-    """
+def select(method, declared, sphere_guess, n, rng, max_range=PLAN_RANGE[1]):
+    """Select poses by name ('boundary' or 'optimal'), the ball at most ``max_range`` (m) away."""
     if method not in SELECTIONS:
         raise ValueError(f"unknown pose selection {method!r} (known: {', '.join(SELECTIONS)})")
     return (boundary if method == 'boundary' else optimal)(declared, sphere_guess, n, rng,
-                                                           max_range=max_range, field=field)
+                                                           max_range=max_range)
