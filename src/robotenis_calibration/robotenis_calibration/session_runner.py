@@ -104,9 +104,9 @@ class RunnerConfig:
     move_timeout: float = 10.0         # s to reach a pose
     # s a rest may take beyond its frames' own time at the detections' rate before it is skipped
     measure_timeout: float = 10.0
-    no_ball_time: float = 0.5          # s without a single detection: ball not in view, skip
-    # A rest's detections that stop for no_ball_time plus two of their periods: the ball flickers
-    # at the edge of the view (seen in 1 of 30 frames), skip rather than wait for measure_timeout
+    # s without a single detection: ball not in view, skip. A rest's detections that stop for
+    # this and two of their periods: a ball flickering at the view's edge, skip it at once
+    no_ball_time: float = 0.5
 
 
 class SessionRunner:
