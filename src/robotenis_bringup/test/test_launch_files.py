@@ -102,6 +102,9 @@ def test_sim_time_puts_the_simulator_and_the_visual_loop_in_lockstep():
     # the frames the simulator may run ahead at rest fit in the detector's queue
     ahead = calibration['sim_motors']['visual_delay'] * calibration['sim_motors']['camera_rate']
     assert calibration['sphere_detector']['image_queue'] > ahead
+    samples_ahead = calibration['sim_motors']['visual_delay'] * 250      # 4 ms truth samples
+    assert calibration['hand_camera']['effector_queue'] > samples_ahead
+    assert nodes['hand_camera']['effector_queue'] == 10    # the tracking loop wants the newest
     assert nodes['sim_motors']['visual_answer'] == 'command'
     # the tracked ball stands still in the image: no slow fit at rest inside the 1/120 s loop
     assert nodes['sphere_detector']['rest_method'] == 'conic'
@@ -115,6 +118,7 @@ def test_sim_time_puts_the_simulator_and_the_visual_loop_in_lockstep():
     ('rest_method', 'robotenis_vision', 'sphere_detector', 'rest_method'),
     ('search_interval', 'robotenis_vision', 'sphere_detector', 'search_interval'),
     ('image_queue', 'robotenis_vision', 'sphere_detector', 'image_queue'),
+    ('effector_queue', 'robotenis_sim', 'hand_camera', 'effector_queue'),
     ('visual_answer', 'robotenis_sim', 'sim_motors', 'visual_answer'),
     ('visual_delay', 'robotenis_sim', 'sim_motors', 'visual_delay'),
     ('visual_timeout', 'robotenis_sim', 'sim_motors', 'visual_timeout'),

@@ -51,6 +51,9 @@ PARAMETERS = {
     'noise': (2.0, 'grey levels: sensor noise'),
     'blur': (0.8, 'px: Gaussian blur of the lens'),
     'tick_on_effector': (False, 'expose on the simulator samples (visual lockstep), no timer'),
+    'effector_queue': (10, 'effector samples kept while busy: a sample lost is a frame not made '
+                           '(a simulator up to 0.1 s ahead at rest: 25; a visual loop wants the '
+                           'newest)'),
 }
 
 
@@ -90,9 +93,8 @@ class HandCameraNode(Node):
                                               qos_profile_sensor_data)
         # the truth is for scorers, which may be busy for a moment: keep 0.8 s of frames for them
         self.ball_pub = self.create_publisher(PointStamped, 'sim/ball_position', 100)
-        # at rest in visual lockstep the simulator runs up to its visual_delay (0.1 s in a
-        # calibration session: 25 samples) ahead of this node; a sample lost is a frame not made
-        self.create_subscription(PointStamped, 'sim/effector_position', self.on_effector, 100)
+        self.create_subscription(PointStamped, 'sim/effector_position', self.on_effector,
+                                 max(1, int(p['effector_queue'])))
         self.frames = camera_model.FrameClock(rate) if p['tick_on_effector'] else None
         if self.frames is None:
             self.create_timer(1.0 / rate, self.render_frame)
