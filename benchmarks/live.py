@@ -125,8 +125,8 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--effects', nargs='+', default=list(EXPECTED), choices=list(EXPECTED))
     parser.add_argument('--poses', type=int, default=90)
-    parser.add_argument('--frames', type=int, default=30)
-    parser.add_argument('--settle', type=float, default=0.3)
+    parser.add_argument('--frames', type=int, default=demo.LIVE_FRAMES)
+    parser.add_argument('--settle', type=float, default=demo.LIVE_SETTLE)
     parser.add_argument('--seed', type=int, default=1)
     parser.add_argument('--images-only', action='store_true',
                         help='only the links apart, no session through ROS')

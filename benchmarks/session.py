@@ -57,10 +57,8 @@ def run(folder, name, spec):
 
 def our_plan(previous, paper_bag_path, spec, guess):
     """Return (settle, frames, overhead) from what the previous session recorded."""
-    noise = previous.description.report['frame_noise']['camera']
-    frame_sigma = np.sqrt(noise['variance_at_reference'])
-    floor = previous.diagnosis.floor.variances
-    floor_sigma = np.sqrt([floor.get(f'camera_{a}', 0.0) for a in 'xyz'])
+    frame_sigma, floor_sigma = protocol.rest_sigmas(previous.description.report['frame_noise'],
+                                                    previous.diagnosis.floor)
     settle = settle_found(paper_bag_path) + 1.0 / spec.camera_rate
     move = spec.move_time[0] + spec.move_time[1] * 0.5   # a typical move of 0.5 rad
     frames = protocol.frames_per_rest(frame_sigma, floor_sigma, move + settle, spec.camera_rate)

@@ -17,7 +17,7 @@ import dataclasses
 import signal
 import sys
 
-from robotenis_calibration import pipeline, rests, result
+from robotenis_calibration import pipeline, protocol, rests, result
 
 
 def settings(args):
@@ -55,6 +55,8 @@ def offline(args):
         return 130
     for line in result.summary(outcome.diagnosis):
         print(line)
+    if 'next_session' in outcome.description.report:
+        print(protocol.next_session_text(outcome.description.report['next_session']))
     print(f'wrote {outcome.result_path} and {outcome.plot_path}')
     return 0
 

@@ -22,7 +22,7 @@ import tempfile
 
 import numpy as np
 
-from robotenis_calibration import diagnosis, rests, result
+from robotenis_calibration import diagnosis, protocol, rests, result
 from robotenis_calibration.rests import RestParameters
 from robotenis_kinematics import description
 from robotenis_kinematics import identification as idf
@@ -271,6 +271,9 @@ def calibrate_bag(bag_dir, out_path, settings=Settings(), progress=None):
     desc.report['settings'] = _plain(asdict(settings))
     desc.report['reproduce'] = settings.command(bag_dir, out_path)
     desc.report['frame_noise'] = session.noise
+    plan = protocol.next_session(session.noise, d.floor, session.timing)
+    if plan is not None:
+        desc.report['next_session'] = plan
     plot_path = plot_path_for(out_path)
     text = description.dumps(desc)
     write_together({plot_path: lambda tmp: result.plot_residuals(d, meas, session.sphere,

@@ -565,4 +565,32 @@ def load_session(bag_dir, params=RestParameters(), progress=None, joints=JOINTS)
         shortest = params.window if params.min_duration is None else params.min_duration
         notes.append(f'no /calibration/rest markers: {len(windows)} rests found from the joint'
                      f' states (still for at least {shortest} s)')
-    return average(rec, windows, params, notes), notes
+    session = average(rec, windows, params, notes)
+    session.timing = rest_timing(rec, windows)
+    return session, notes
+
+
+def rest_timing(rec, windows):
+    """
+    Return the recording's pace, {'camera_rate_hz', 'rest_overhead_s'}, or None if it cannot tell.
+
+    The rate is that of the detections within the rests (median over rests of their frames less
+    one over their span: frames the detector dropped included); the overhead is the robot time a
+    rest costs besides its frames: the median time from one rest's start to the next one's, less
+    the median rest's frames at that rate (the move, the settling, the wait for the first frame).
+    Needs two rests with two frames each.
+    """
+    rates, counts = [], []
+    for t0, t1, _ in windows:
+        t = rec.t_sphere[np.searchsorted(rec.t_sphere, t0):
+                         np.searchsorted(rec.t_sphere, t1, side='right')]
+        if len(t) >= 2 and t[-1] > t[0]:
+            rates.append((len(t) - 1) / (t[-1] - t[0]))
+            counts.append(len(t))
+    if len(rates) < 2:
+        return None
+    rate = float(np.median(rates))
+    overhead = float(np.median(np.diff([t0 for t0, _, _ in windows])) - np.median(counts) / rate)
+    if not overhead > 0:
+        return None
+    return {'camera_rate_hz': rate, 'rest_overhead_s': overhead}

@@ -39,6 +39,8 @@ class Session:
     approach : (K, G, 3) the backlash contact side for a gap of each of ``gaps`` (G,) rad: the
         sign of the last reversal of the readings across it (rests.approach_directions), when the
         recording shows the motion; ``direction`` is one of them.
+    timing : the recording's pace (plain data, rests.rest_timing): the camera's rate and the robot
+        time a rest costs besides its frames; or None.
     """
 
     description: object
@@ -52,6 +54,7 @@ class Session:
     noise: dict = field(default=None)
     approach: np.ndarray = field(default=None)
     gaps: np.ndarray = field(default=None)
+    timing: dict = field(default=None)
 
     def __post_init__(self):
         K = len(self.Theta)
@@ -76,7 +79,8 @@ class Session:
         return Session(self.description, self.Theta[index], self.sigma_Theta[index],
                        self.sphere[index], self.sphere_cov[index], self.stamps[index],
                        self.samples[index], self.direction[index], self.noise,
-                       None if self.approach is None else self.approach[index], self.gaps)
+                       None if self.approach is None else self.approach[index], self.gaps,
+                       self.timing)
 
     def with_backlash(self, width):
         """

@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 from robotenis_calibration import protocol
+from robotenis_kinematics import variance
 
 
 def information_rate(sigma, floor, overhead, rate, N):
@@ -27,3 +28,17 @@ def test_the_axis_that_needs_most_frames_decides_and_no_floor_means_the_most():
 def test_bad_timing_is_refused():
     with pytest.raises(ValueError, match='overhead and rate'):
         protocol.frames_per_rest([1e-4] * 3, [1e-5] * 3, 0.0, 100.0)
+
+
+def test_the_next_session_takes_the_rests_floor_at_the_noise_models_range():
+    """next_session: the floor's constant and range-grown parts add at the reference range."""
+    noise = {'camera': {'variance_at_reference': [1e-8, 1e-8, 4e-8]}}
+    floor = variance.Floor({'camera_x': 1e-10, 'camera_z': 2e-10, 'camera_z_range': 2e-10})
+    timing = {'camera_rate_hz': 100.0, 'rest_overhead_s': 0.5}
+    plan = protocol.next_session(noise, floor, timing)
+    # z decides: (2e-4 / 2e-5) sqrt(0.5 * 100) = 70.7
+    assert plan['frames_per_rest'] == 71
+    assert plan['floor_m'] == pytest.approx([1e-5, 0.0, 2e-5])
+    assert '71 frames per rest' in protocol.next_session_text(plan)
+    assert protocol.next_session(noise, variance.Floor(), timing) is None
+    assert protocol.next_session(noise, floor, None) is None

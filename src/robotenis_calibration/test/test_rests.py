@@ -101,3 +101,15 @@ def test_a_reversal_across_the_gap_counts_even_where_it_straddles_the_rest():
     # joint 1 crossed it back (the reading farthest from the rest was the approach's, +1);
     # joint 2 came back 0.4 mrad only: the approach's side; joint 3 did not move: as before
     assert list(sides[at]) == [-1.0, 1.0, -1.0]
+
+
+def test_the_pace_of_a_recording_is_its_camera_rate_and_the_time_between_rests(tmp_path):
+    """rest_timing: 120 Hz, and 1 s besides the frames: a 0.4 s move, 0.5 s settle, 0.1 s tail."""
+    spec = session_bag.BagSpec(poses=12, seed=2, move_time=(0.4, 0.0), settle=0.5)
+    session, _ = rests.load_session(session_bag.write(tmp_path / 'bag', spec).path)
+    period = 1.0 / spec.camera_rate
+    assert session.timing['camera_rate_hz'] == pytest.approx(spec.camera_rate, rel=1e-6)
+    # the end marker half a period after the last frame, the first frame on the next period
+    # boundary after the settle: the overhead is 1 s less half a period, plus up to one period
+    overhead = session_bag.TAIL + 0.4 + spec.settle - 0.5 * period
+    assert overhead - 1e-6 <= session.timing['rest_overhead_s'] <= overhead + period + 1e-6

@@ -11,6 +11,8 @@ calibration node records it) and the simulator's truth file it ran with, and pri
   hand camera's defaults and detected, per method: the detector's bias at each pose, the part of
   a rest's error that averaging its frames does not remove (study.detector_bias), and what is left
   of the rests' error without it;
+* the rests' first 1, 3, 10 frames averaged against the truth: where the rests' own floor stops
+  more frames from helping;
 * the backlash side: the same difference when each joint's side is the one that fits best (a
   side the scorer got wrong shows as a large drop), and how many of the sides the calibration
   took (a play of the gap it chose) differ from the simulator's;
@@ -39,6 +41,7 @@ from robotenis_sim import truth as sim_truth
 from robotenis_validation.study import detector_bias
 
 METHODS = ('conic', 'model')
+FIRST_FRAMES = (1, 3, 10)       # frames of each rest averaged by first_frames_error
 
 
 def true_centres(truth, Theta, direction):
@@ -135,6 +138,31 @@ def holdout_truth_error_mm(d, meas, session, truth, model=None, sides=None):
     return float(np.sqrt(np.mean(diagnosis.position_errors(model, seen) ** 2)) * 1e3)
 
 
+def first_frames_error(bag, truth, session, sides, counts=FIRST_FRAMES):
+    """
+    Return {n: (K', 3)} each marked rest's first n frames averaged, less the truth (m).
+
+    How many frames a rest needs on the live chain: once the rests' own floor dominates, their
+    error against the truth stops falling with n (protocol.frames_per_rest's premise). Rests are
+    those of ``session`` (read with markers) with at least max(counts) frames; ``sides``: the
+    truth's backlash sides at them (TrueSides.at(session.stamps)).
+    """
+    with bag_io.BagReader(bag) as reader:
+        rec = rests.read(reader, [])
+    windows = {round(0.5 * (t0 + t1), 6): (t0, t1) for t0, t1, _ in
+               rests.marked_windows(rec.markers, [])}
+    true = true_sphere(truth, session.Theta, sides)
+    out = {n: [] for n in counts}
+    for k, stamp in enumerate(session.stamps):
+        t0, t1 = windows.get(round(float(stamp), 6), (np.inf, -np.inf))
+        frames = rec.sphere[np.searchsorted(rec.t_sphere, t0):
+                            np.searchsorted(rec.t_sphere, t1, side='right')]
+        if len(frames) >= max(counts):
+            for n in counts:
+                out[n].append(frames[:n].mean(axis=0) - true[k])
+    return {n: np.reshape(e, (-1, 3)) for n, e in out.items()}
+
+
 def calibrated_as_the_service(bag, seed):
     """
     Return (session, diagnosis, measurements) of a session bag calibrated as the service does.
@@ -194,6 +222,8 @@ def main(argv=None):
         ok = np.all(np.isfinite(bias[method]), axis=1)
         print(_line(f'detector bias ({method}), noise-free renders', bias[method][ok]))
         print(_line(f'rests minus truth minus the {method} bias', (error - bias[method])[ok]))
+    for n, e in first_frames_error(args.bag, truth, session, sides).items():
+        print(_line(f'rests minus truth, their first {n} frames', e))
     e, flipped = best_sides(truth, session, sides)
     print(_line(f'rests, best backlash sides ({flipped} of {3 * len(session)} flipped)', e))
     print(calibration_line('calibrated as recorded', session, truth, true_sides))

@@ -80,3 +80,16 @@ def test_the_held_out_error_against_the_truth_is_the_loops_own_on_exact_readings
     # as recorded, the held-out rests' own noise adds to what the truth sees
     d, meas = pipeline.calibrate_session(session)
     assert live_links.holdout_truth_error_mm(d, meas, session, truth) < d.errors_mm['final']
+
+
+def test_a_rests_first_frames_scatter_as_their_noise_about_the_truth(tmp_path):
+    """first_frames_error: without a floor, n frames' mean is off the truth by sigma / sqrt(n)."""
+    bag = session_bag.write(tmp_path / 'bag', session_bag.BagSpec(poses=40, seed=8))
+    session, _ = rests.load_session(bag.path)
+    truth = sim_truth.load()
+    errors = live_links.first_frames_error(bag.path, truth, session, session.direction)
+    for n, e in errors.items():
+        assert len(e) == len(session)
+        chi2 = float(np.sum((e / session_bag.FRAME_SIGMA) ** 2) * n)
+        dof = e.size
+        assert stats.chi2.ppf(0.005, dof) < chi2 < stats.chi2.ppf(0.995, dof), n
