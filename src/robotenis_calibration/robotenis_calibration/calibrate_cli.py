@@ -86,6 +86,9 @@ def main(argv=None):
                         help='bag path for the recorded session (with --call)')
     parser.add_argument('--namespace', default='', help="the system's namespace (with --call)")
     args = parser.parse_args(argv)
+    if args.call and args.settle is not None and not args.settle > 0:
+        parser.error(f'--settle with --call must be positive, got {args.settle} (the service '
+                     "reads 0 as its own default, the node's settle_time parameter)")
     if args.call:
         from robotenis_calibration import service_client
         return service_client.call(args)

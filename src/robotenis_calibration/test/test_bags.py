@@ -19,8 +19,8 @@ from mcap.records import Message
 from mcap.stream_reader import StreamReader
 import numpy as np
 import pytest
-from robotenis_calibration import bag_io, calibrate_cli, pipeline, rests
-from robotenis_kinematics import description
+from robotenis_calibration import bag_io, calibrate_cli, pipeline, protocol, rests
+from robotenis_kinematics import description, variance
 from robotenis_sim import session_bag as bag_sim
 from robotenis_sim.scenarios import EFFECTS
 from scipy import stats
@@ -414,3 +414,26 @@ def test_a_signal_never_replaces_the_previous_result(clean, tmp_path):
     assert 'interrupted by SIGTERM' in err
     assert out.read_text() == 'previous result\n'
     assert sorted(os.listdir(tmp_path)) == ['RESULT.yaml']
+
+
+def test_a_settle_of_zero_is_refused_for_a_session_not_silently_the_default(capsys):
+    """The service reads settle_time 0 as its default (4 s): asked for 0, the client says so."""
+    with pytest.raises(SystemExit):
+        calibrate_cli.main(['--call', '--settle', '0'])
+    assert '--settle with --call must be positive, got 0.0' in capsys.readouterr().err
+
+
+def test_the_result_says_how_many_frames_the_next_session_should_take(tmp_path, capsys):
+    """next_session in the result and the output: the rule on the result's own noise and floor."""
+    bag = bag_sim.write(tmp_path / 'bag', bag_sim.BagSpec(poses=60, seed=3,
+                                                          rest_floor=(1e-4,) * 3))
+    out = tmp_path / 'RESULT.yaml'
+    assert calibrate_cli.main([bag.path, '--out', str(out)]) == 0
+    report = description.load(out).report
+    plan = report['next_session']
+    assert f"next session: {plan['frames_per_rest']} frames per rest" in capsys.readouterr().out
+    floor = variance.Floor({name: c['variance'] for name, c in report['noise_floor'].items()})
+    sigma, f = protocol.rest_sigmas(report['frame_noise'], floor)
+    assert plan['frames_per_rest'] == protocol.frames_per_rest(
+        sigma, f, plan['rest_overhead_s'], plan['camera_rate_hz'])
+    assert plan['camera_rate_hz'] == pytest.approx(bag_sim.BagSpec().camera_rate, rel=1e-6)
