@@ -10,7 +10,8 @@ calibration node records it) and the simulator's truth file it ran with, and pri
 * the detector alone: the ball rendered without sensor noise at those true positions with the
   hand camera's defaults and detected, per method: the detector's bias at each pose, the part of
   a rest's error that averaging its frames does not remove (study.detector_bias), and what is left
-  of the rests' error without it;
+  of the rests' error without it; and the model method's bias without the renderer's specular
+  highlight, then without its lens blur (BIAS_SOURCES): where the bias comes from;
 * the rests' first 1, 3, 10 frames averaged against the truth: where the rests' own floor stops
   more frames from helping;
 * the backlash side: the same difference when each joint's side is the one that fits best (a
@@ -36,12 +37,15 @@ import sys
 import numpy as np
 from robotenis_calibration import bag_io, diagnosis, pipeline, rests, result
 from robotenis_kinematics import delta, description, effects, workspace
-from robotenis_sim import static_session
+from robotenis_sim import camera_model, static_session
 from robotenis_sim import truth as sim_truth
 from robotenis_validation.study import detector_bias
 
 METHODS = ('conic', 'model')
 FIRST_FRAMES = (1, 3, 10)       # frames of each rest averaged by first_frames_error
+# the renderer's defaults, one at a time, that the model method's bias comes from
+BIAS_SOURCES = {'no specular highlight': {'lighting': camera_model.Lighting(specular=0.0)},
+                'no lens blur': {'blur_sigma': 0.0}}
 
 
 def true_centres(truth, Theta, direction):
@@ -222,6 +226,9 @@ def main(argv=None):
         ok = np.all(np.isfinite(bias[method]), axis=1)
         print(_line(f'detector bias ({method}), noise-free renders', bias[method][ok]))
         print(_line(f'rests minus truth minus the {method} bias', (error - bias[method])[ok]))
+    for label, options in BIAS_SOURCES.items():
+        b = detector_bias(C, truth.geometry.sphere_radius, 'model', **options)
+        print(_line(f'detector bias (model), {label}', b[np.all(np.isfinite(b), axis=1)]))
     for n, e in first_frames_error(args.bag, truth, session, sides).items():
         print(_line(f'rests minus truth, their first {n} frames', e))
     e, flipped = best_sides(truth, session, sides)

@@ -9,19 +9,20 @@ from robotenis_vision import camera as vision_camera
 from robotenis_vision import detector
 
 
-def detector_bias(C, radius, method='model', camera=None):
+def detector_bias(C, radius, method='model', camera=None, **render_options):
     """
     Return what the detector gets wrong (K, 3), m, for balls at true centres C (K, 3, optical).
 
     Each ball is rendered by the hand camera's renderer without sensor noise (its defaults
-    otherwise) and measured: the error left is the detector's bias at that pose, the part that
-    averaging frames at a rest does not remove. A refused image gives a row of NaN.
+    otherwise, or ``render_options`` of camera_model.render: a lighting, a blur) and measured: the
+    error left is the detector's bias at that pose, the part that averaging frames at a rest does
+    not remove. A refused image gives a row of NaN.
     """
     camera = camera or vision_camera.default()
     rng = np.random.default_rng(0)
     out = np.full((len(C), 3), np.nan)
     for k, c in enumerate(np.asarray(C, dtype=float)):
-        image = camera_model.render(camera, c, radius, rng, noise_sigma=0.0)
+        image = camera_model.render(camera, c, radius, rng, noise_sigma=0.0, **render_options)
         try:
             out[k] = detector.detect(image, camera, radius, method).position - c
         except detector.DetectionError:

@@ -93,3 +93,12 @@ def test_a_rests_first_frames_scatter_as_their_noise_about_the_truth(tmp_path):
         chi2 = float(np.sum((e / session_bag.FRAME_SIGMA) ** 2) * n)
         dof = e.size
         assert stats.chi2.ppf(0.005, dof) < chi2 < stats.chi2.ppf(0.995, dof), n
+
+
+def test_the_bias_sources_render_and_change_the_bias():
+    """BIAS_SOURCES: each renders a measurable ball whose bias differs from the defaults'."""
+    C = np.array([[0.03, -0.02, 0.32]])
+    default = study.detector_bias(C, 0.019)
+    for label, options in live_links.BIAS_SOURCES.items():
+        bias = study.detector_bias(C, 0.019, **options)
+        assert np.all(np.isfinite(bias)) and not np.allclose(bias, default), label
