@@ -45,10 +45,16 @@ STATIC_POSES = 300
 TARGET_MM, TARGET_RATIO = 0.1, 3.0
 
 
-def verdict(expected, claimed, live, static):
-    """MET or NOT MET with the reason (live, static: held-out errors against the truth, mm)."""
+def verdict(expected, claimed, live, static, alike=None):
+    """
+    MET or NOT MET with the reason (live, static: held-out errors against the truth, mm).
+
+    ``alike``: {effect claimed: the named effects the session could not tell from it}.
+    """
     if claimed != [expected]:
-        return f'NOT MET (claimed {", ".join(claimed) or "nothing"})'
+        tied = [c for c in claimed if expected in (alike or {}).get(c, [])]
+        return (f'NOT MET (claimed {", ".join(claimed) or "nothing"}'
+                + (f', which the poses could not tell from {expected})' if tied else ')'))
     if live > TARGET_MM or live > TARGET_RATIO * static:
         return f'NOT MET ({live:.3f} mm; {live / static:.1f}x the static floor)'
     return 'MET'
@@ -153,7 +159,8 @@ def main():
             apart += lines
             print('\n'.join(apart[-2:]), flush=True)
             rows.append((effect, ', '.join(claimed) or 'none', live, static, wall,
-                         verdict(EXPECTED[effect], claimed, live[0], static[0])))
+                         verdict(EXPECTED[effect], claimed, live[0], static[0],
+                                 desc.report.get('indistinguishable'))))
     print(f'\nthe links apart: {args.poses} poses, effects claimed, errors against the truth')
     print('\n'.join(apart))
     if args.images_only:

@@ -41,7 +41,7 @@ import numpy as np
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.serialization import deserialize_message, serialize_message
-from robotenis_calibration import bag_io, pipeline, poses, protocol, session_limits
+from robotenis_calibration import bag_io, pipeline, poses, protocol, result, session_limits
 from robotenis_calibration.session_runner import DONE, MEASURING, RunnerConfig, SessionRunner
 from robotenis_interfaces.msg import CalibrationProgress, RestMarker, SphereDetection
 from robotenis_interfaces.srv import Calibrate
@@ -369,7 +369,7 @@ class CalibrationNode(Node):
         d = outcome.diagnosis
         response.success = True
         response.message = (f'{len(planned) - len(skipped)} of {len(planned)} poses measured; '
-                            f'effects found: {", ".join(d.effects) or "none"}')
+                            f'effects found: {result.effects_text(d)}')
         if 'next_session' in outcome.description.report:
             response.message += '; ' + protocol.next_session_text(
                 outcome.description.report['next_session'])

@@ -25,8 +25,12 @@ The residual loop: find what the model lacks, add it, and prove it helped on hel
    adds nothing to the generic, the generic stands and the name is dropped (a library effect
    that explains a part of an unknown one is not that effect); if each adds to the other, the
    generic stands and the name must still add on top of it in a later round to be claimed.
-   After each effect kept the floor is learned again; repeat until no candidate is left
-   significant.
+   It is then confronted with the other significant named effects in the same way: a rival
+   that adds to it where it adds nothing to the rival explains more and is claimed instead (if
+   it improves the held-out poses); a rival that neither adds to it nor gains from it is the
+   same explanation on these poses, and is reported beside the claim as indistinguishable
+   (``Step.equivalent``), not silently lost to a score a fraction higher. After each effect
+   kept the floor is learned again; repeat until no candidate is left significant.
 5. The held-out poses then test the whole model and floor: their chi-square against chi2(3K)
    (with the fitted parameters' own error in the predictive covariance). If it is too large, a
    fallback tests the residuals' correlation with what could explain them (joint angle, motion
@@ -112,6 +116,9 @@ class Step:
     holdout_p_value: float = 1.0
     reason: str = ''
     generic_p_value: float = None   # p of the generic rivals adding to the named effect
+    # named effects these poses cannot tell from the chosen one: (name, p that it adds to the
+    # chosen one, p that the chosen one adds to it)
+    equivalent: list = field(default_factory=list)
 
 
 @dataclass
@@ -131,6 +138,12 @@ class Diagnosis:
     fallback: list = field(default_factory=list)
     sizes: dict = field(default_factory=dict)     # generic effect -> orders or parameters kept
     correlates: dict = field(default_factory=dict)  # generic effect -> generic_correlations
+
+    @property
+    def indistinguishable(self):
+        """Return {effect claimed: [named effects these poses cannot tell from it]}."""
+        return {step.chosen: [name for name, _, _ in step.equivalent]
+                for step in self.steps if step.kept and step.equivalent}
 
     @functools.cached_property
     def workspace_fk_std_mm(self):
@@ -509,6 +522,9 @@ class _Loop:
             name, size, trial, used = self.attribute(step, best, trial, tests)
             if name is None:
                 return used
+            if name == best.name:
+                name, trial = self.distinguish(step, best, trial, significant)
+                used = [name]
         step.kept = True
         step.reason = step.reason or 'fit and held-out poses improved significantly'
         self.accept(name, size, trial)
@@ -556,6 +572,39 @@ class _Loop:
                                f'stands and {best.name} must add to it to be claimed')
                 return rival.name, rival.size, generic, [rival.name]
         return best.name, None, trial, [best.name]
+
+    def distinguish(self, step, best, trial, significant):
+        """
+        Return (effect, its fit): ``best`` or another named effect that explains more.
+
+        Encompassing tests between the named candidates significant this round, as ``attribute``
+        runs them against the generic ones: does the rival add to ``best`` (score test at best's
+        fit), and does ``best`` add to the rival (at the rival's)? A rival that adds where best
+        adds nothing to it is claimed instead, if it improves the held-out poses; one that
+        neither adds nor gains is indistinguishable from best on these poses (step.equivalent).
+        """
+        train = self.widened(self.m_train)
+        for rival in sorted((t for t in significant if t.name in NAMED and t.name != best.name),
+                            key=lambda t: -t.z):
+            adds = score_test(trial, train, rival.name).p_value
+            rival_fit = self.fit(rival)
+            gains = score_test(rival_fit, train, best.name).p_value
+            if gains >= self.alpha and adds < self.alpha \
+                    and self.compare(self.current, rival_fit) < self.alpha:
+                step.chosen = rival.name
+                step.reason = (f'{best.name} helped, but {rival.name} adds to it (p = '
+                               f'{adds:.3g}) and {best.name} adds nothing to {rival.name} (p = '
+                               f'{gains:.3g}): {rival.name} is claimed')
+                step.equivalent = []
+                return rival.name, rival_fit
+            if gains >= self.alpha and adds >= self.alpha:
+                step.equivalent.append((rival.name, adds, gains))
+        if step.equivalent:
+            step.reason = ('fit and held-out poses improved significantly; these poses cannot '
+                           'tell it from ' + ', '.join(
+                               f'{n} (neither adds to the other: p = {a:.2g}, {g:.2g})'
+                               for n, a, g in step.equivalent))
+        return best.name, trial
 
     def accept(self, name, size, trial):
         self.found.append(name)

@@ -87,6 +87,7 @@ def report(diagnosis):
             'chi2_before': step.chi2_before, 'chi2_after': step.chi2_after,
             'likelihood_ratio_p': step.lr_p_value, 'holdout_p': step.holdout_p_value,
             'generic_adds_p': step.generic_p_value,
+            'equivalent': [{'name': n, 'adds_p': a, 'gains_p': g} for n, a, g in step.equivalent],
         })
     rms, largest = diagnosis.workspace_fk_std_mm
     return {
@@ -99,6 +100,7 @@ def report(diagnosis):
         'generic_sizes': {k: (list(v) if isinstance(v, tuple) else v)
                           for k, v in diagnosis.sizes.items()},
         'effects_found': list(diagnosis.effects),
+        'indistinguishable': diagnosis.indistinguishable,
         'steps': steps,
         'unexplained_structure': [{'feature': f, 'joint': j, 'correlation': r, 'p_value': p}
                                   for f, j, r, p in diagnosis.fallback],
@@ -108,13 +110,21 @@ def report(diagnosis):
     }
 
 
+def effects_text(diagnosis):
+    """Return the effects found for a human, each with those these poses cannot tell from it."""
+    alike = diagnosis.indistinguishable
+    return ', '.join(name + (f" (or {', '.join(alike[name])}: these poses cannot tell them apart)"
+                             if name in alike else '')
+                     for name in diagnosis.effects) or 'none'
+
+
 def summary(diagnosis):
     """Return lines for a human: before/after errors, effects, flags."""
     e = diagnosis.errors_mm
     lines = [f"held-out RMS error: nominal {e['nominal']:.3f} mm,"
              f" plain 15-parameter {e['plain']:.3f} mm, "
              f"final {e['final']:.3f} mm ({len(diagnosis.holdout)} held-out poses)",
-             f"effects found: {', '.join(diagnosis.effects) or 'none'}"]
+             f'effects found: {effects_text(diagnosis)}']
     for name, correlates in diagnosis.correlates.items():
         size = diagnosis.sizes[name]
         size = f"orders {', '.join(map(str, size))}" if name == 'joint_harmonics' else \
