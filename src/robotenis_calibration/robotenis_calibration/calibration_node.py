@@ -337,7 +337,9 @@ class CalibrationNode(Node):
         # The wall clock too: on simulated time a detector's silence must also be the wall's.
         self.runner = SessionRunner(planned, config, on_replan, clock=time.monotonic)
         self.runner.start(self.now())
-        self.run_actions()                  # the first goal, now
+        if not self.runner.started:
+            self.get_logger().info('waiting for the clock to run (no /clock message yet)')
+        self.run_actions()                  # the first goal, now or once the clock runs
 
     def finish_session(self):
         """Close the bag, calibrate from it and answer the request (the runner is done)."""

@@ -402,7 +402,11 @@ def frame_noise(groups, z, floor, grow=True):
 
     Maximum likelihood over the rests with two or more samples: given g, the best c is the
     dof-weighted mean of s^2 / (z / z_ref)^g; g is searched over EXPONENTS (``grow`` False: 0).
-    ``floor`` (p,) bounds c from below.
+    ``floor`` (p,) bounds c from below. A rest whose spread the model cannot have given, its
+    (n - 1) s^2 / (c (z / z_ref)^g) beyond chi2(n - 1)'s quantile 1 - START_ALPHA on an axis (the
+    robot moving during it, two things taken for the ball: too few samples for the gate within
+    the rest), is left out and the model fitted again, until the rests kept repeat: one such
+    rest made the whole bag's noise a thousand times too large.
     """
     used = [k for k, x in enumerate(groups) if len(x) >= 2]
     p = groups[used[0]].shape[1] if used else len(floor)
@@ -412,6 +416,25 @@ def frame_noise(groups, z, floor, grow=True):
     resid = [groups[k] - groups[k].mean(axis=0) for k in used]
     s2 = np.array([np.sum(r ** 2, axis=0) for r in resid]) / dof[:, None]
     zr = np.asarray(z, dtype=float)[used] / Z_REFERENCE
+    gate = np.array([chi2_quantile(1 - START_ALPHA, int(n)) for n in dof])
+    keep = np.ones(len(used), dtype=bool)
+    for _ in range(MAX_PASSES):
+        c, g = _noise_fit(dof[keep], s2[keep], zr[keep], floor, grow)
+        model = c * zr[:, None] ** g
+        agree = np.all(dof[:, None] * s2 <= gate[:, None] * model, axis=1)
+        if np.array_equal(agree, keep) or not agree.any():
+            break
+        keep = agree
+    sd = np.sqrt(model)
+    u = np.concatenate([r / sd[i] for i, r in enumerate(resid) if keep[i]])
+    moment = u.T @ u / np.sum(dof[keep])
+    d = np.sqrt(np.diag(moment))
+    return FrameNoise(c, g, moment / np.outer(d, d))
+
+
+def _noise_fit(dof, s2, zr, floor, grow):
+    """Return (c, g) per axis: frame_noise's maximum likelihood over rests' variances s2 (K, p)."""
+    p = s2.shape[1]
     c, g = np.empty(p), np.empty(p)
     for a in range(p):
         best = None
@@ -422,11 +445,7 @@ def frame_noise(groups, z, floor, grow=True):
             if best is None or loss < best[0]:
                 best = (loss, ca, exponent)
         _, c[a], g[a] = best
-    sd = np.sqrt(c * zr[:, None] ** g)
-    u = np.concatenate([r / sd[i] for i, r in enumerate(resid)])
-    moment = u.T @ u / np.sum(dof)
-    d = np.sqrt(np.diag(moment))
-    return FrameNoise(c, g, moment / np.outer(d, d))
+    return c, g
 
 
 def known_gate(x, cov, alpha):

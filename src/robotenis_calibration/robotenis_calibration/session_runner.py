@@ -133,6 +133,7 @@ class SessionRunner:
         self._wall_state = None
         self.actions = []
         self._t_state = None
+        self._clock_wait = None           # wall time start() began waiting for the clock
         self._window = SlidingRange(config.still_time)   # the last still_time while moving
         self._rest = None
         self._last_detection = None       # (robot, wall) time of the rest's last detection
@@ -168,13 +169,46 @@ class SessionRunner:
         self.actions.append(('progress', (MOVING, self.index, len(self.poses))))
 
     def start(self, t):
-        """Start the session at time t (s): command the first pose."""
+        """
+        Start the session at time t (s): command the first pose.
+
+        A time of 0 is a simulated clock that has not started (ROS time 0: no /clock message
+        yet). The first pose is then commanded at the first tick with a time: commanded at 0, the
+        readings of the robot still at home before it moved passed for the pose reached, and the
+        first rest measured the move (one live session's pose 0: 0.57 rad of motion and 4 frames
+        in its rest, which spoilt the readings' noise model of the whole bag).
+        """
+        if t <= 0:
+            self._clock_wait = self._wall()
+            return
+        self._clock_wait = None
         self.last_input = dict.fromkeys(INPUTS, t)
         self._wall_input = dict.fromkeys(INPUTS, self._wall())
         self._next_pose(t)
 
+    @property
+    def started(self):
+        """Whether the first pose was commanded (start waits for a clock that runs)."""
+        return self._t_state is not None
+
+    def _wait_for_clock(self, t):
+        """Start once the clock runs; stop, saying why, if it stays at 0 longer than a pose."""
+        if t > 0:
+            self.start(t)
+            return
+        limit = session_limits.pose_time_limit(self.config)
+        waited = None if self._clock_wait is None else self._wall() - self._clock_wait
+        if waited is not None and waited > limit:
+            self.failure = (f'the clock stayed at 0 for {waited:.1f} s of wall time, longer than '
+                            f'a pose can last ({limit:.1f} s): no /clock message (is the '
+                            'simulator running, with sim_time on every node?)')
+            self._enter(DONE, t)
+            self.actions.append(('done', None))
+
     def joint_state(self, t, Theta):
         """Take one /joint_states sample: the increments (rad) of the three joints."""
+        if not self.started:
+            return
         self._heard('joint_states', t)
         if self.state == MOVING:
             self._window.add(t, [float(v) for v in Theta])
@@ -195,6 +229,8 @@ class SessionRunner:
         the images' stamps (robotenis_calibration.rests), and a detector a few frames behind would
         otherwise end a rest with fewer frames in it than asked.
         """
+        if not self.started:
+            return
         self._heard('sphere/detection', t)
         if (self.state == MEASURING and np.all(np.isfinite(position))
                 and (stamp is None or stamp >= self._rest.start)):
@@ -208,6 +244,10 @@ class SessionRunner:
     def tick(self, t):
         """Advance on time alone: settle time over, time-outs, enough frames, silent inputs."""
         c = self.config
+        if not self.started:
+            if self.state != DONE:
+                self._wait_for_clock(t)
+            return
         if self.state != DONE and self._stop_if_silent(t):
             return
         if self.state == MOVING and t - self._t_state > c.move_timeout:

@@ -113,3 +113,22 @@ def test_the_pace_of_a_recording_is_its_camera_rate_and_the_time_between_rests(t
     # boundary after the settle: the overhead is 1 s less half a period, plus up to one period
     overhead = session_bag.TAIL + 0.4 + spec.settle - 0.5 * period
     assert overhead - 1e-6 <= session.timing['rest_overhead_s'] <= overhead + period + 1e-6
+
+
+def test_a_rest_that_moved_does_not_spoil_the_noise_model():
+    """
+    A rest whose spread no noise gives is left out of frame_noise.
+
+    60 rests of 12 samples of known noise, and one of 2 samples 0.5 rad apart (the robot moving
+    during it): the model is the clean rests' own, within its chi-square band.
+    """
+    rng = np.random.default_rng(11)
+    sigma = 2e-5
+    clean = [rng.normal(scale=sigma, size=(12, 3)) for _ in range(60)]
+    moved = np.array([[0.0, 0.0, 0.0], [0.5, 0.4, 0.6]])
+    z = np.full(61, rests.Z_REFERENCE)
+    noise = rests.frame_noise(clean + [moved], z, np.zeros(3), grow=False)
+    dof = 60 * 11
+    band = stats.chi2.ppf([0.0005, 0.9995], dof) / dof * sigma ** 2
+    assert np.all((band[0] < noise.c) & (noise.c < band[1]))
+    assert np.array_equal(noise.c, rests.frame_noise(clean, z[:60], np.zeros(3), grow=False).c)

@@ -257,9 +257,9 @@ def test_joint_states_that_stop_stop_the_session_naming_them():
 
 def test_a_stop_while_measuring_closes_the_rest():
     runner = SessionRunner(np.zeros((1, 3)), RunnerConfig(frames_per_pose=5, settle_time=0.0))
-    runner.start(0.0)
+    runner.start(1.0)
     runner.state = MEASURING
-    runner.tick(session_limits.pose_time_limit(runner.config) + 0.1)
+    runner.tick(1.0 + session_limits.pose_time_limit(runner.config) + 0.1)
     kinds = [a[0] for a in runner.take_actions()]
     assert kinds[-2:] == ['rest_end', 'done'] and runner.state == DONE
 
@@ -281,3 +281,29 @@ def test_the_sliding_range_is_the_window_s_max_minus_min():
         got = np.array(window.ranges())
         assert np.array_equal(np.isnan(got), np.isnan(want))
         assert np.array_equal(got[~np.isnan(want)], want[~np.isnan(want)])
+
+
+def test_a_session_waits_for_the_clock_to_run_before_its_first_pose():
+    """Time 0 is a simulated clock without /clock yet: no goal, no reading taken until it runs."""
+    runner = SessionRunner(np.array([[0.1, 0, 1.0]]), RunnerConfig(frames_per_pose=5))
+    runner.start(0.0)
+    runner.joint_state(0.0, np.zeros(3))          # the robot at home, stamped before the clock
+    runner.tick(0.0)
+    assert not runner.started and runner.take_actions() == []
+    runner.tick(7.5)
+    kind, goal = runner.take_actions()[0]
+    assert runner.started and kind == 'goal' and np.array_equal(goal, runner.poses[0])
+    # the reading taken at 0 is not in the window that judges the move over
+    runner.joint_state(7.6, np.zeros(3))
+    assert runner.state != MEASURING and runner._window.first == 7.6
+
+
+def test_a_clock_that_never_runs_stops_the_session_saying_so():
+    wall = [100.0]
+    config = RunnerConfig(frames_per_pose=5)
+    runner = SessionRunner(np.array([[0.1, 0, 1.0]]), config, clock=lambda: wall[0])
+    runner.start(0.0)
+    wall[0] += session_limits.pose_time_limit(config) + 0.5
+    runner.tick(0.0)
+    assert runner.state == DONE and 'no /clock message' in runner.failure
+    assert runner.take_actions() == [('done', None)]
