@@ -103,6 +103,11 @@ class Recording:
     sphere: np.ndarray
     markers: list
 
+    def frames(self, t0, t1):
+        """Return the slice of the sphere samples stamped from t0 to t1 (s), both included."""
+        return slice(np.searchsorted(self.t_sphere, t0),
+                     np.searchsorted(self.t_sphere, t1, side='right'))
+
 
 def check_topics(reader):
     """Raise ValueError naming a required topic that is missing, of another type, or empty."""
@@ -274,8 +279,7 @@ def found_windows(rec, params, notes):
     t_first, out = rec.t_joint[0], []
     for a, b in periods:
         # the margin never leaves a rest fewer frames than it needs: its last ones are the calmest
-        i0, i1 = np.searchsorted(rec.t_sphere, a), np.searchsorted(rec.t_sphere, b, side='right')
-        frames = rec.t_sphere[i0:i1]
+        frames = rec.t_sphere[rec.frames(a, b)]
         latest = frames[-params.min_samples] if len(frames) >= params.min_samples else a
         out.append((min(a + settle, latest), b, f'rest at {a - t_first:.1f} s'))
     return out
@@ -513,9 +517,8 @@ def average(rec, windows, params, notes):
     _, q = resolver_noise(rec.Theta)
     spheres, readings, kept_windows = [], [], []
     for t0, t1, label in windows:
-        s0, s1 = np.searchsorted(rec.t_sphere, t0), np.searchsorted(rec.t_sphere, t1, side='right')
         j0, j1 = np.searchsorted(rec.t_joint, t0), np.searchsorted(rec.t_joint, t1, side='right')
-        sphere = rec.sphere[s0:s1]
+        sphere = rec.sphere[rec.frames(t0, t1)]
         sphere = sphere[np.all(np.isfinite(sphere), axis=1)]
         if min(len(sphere), j1 - j0) < params.min_samples:
             notes.append(f'{label}: only {len(sphere)} camera frames and {j1 - j0} readings '
@@ -601,8 +604,7 @@ def rest_timing(rec, windows):
     """
     rates, counts = [], []
     for t0, t1, _ in windows:
-        t = rec.t_sphere[np.searchsorted(rec.t_sphere, t0):
-                         np.searchsorted(rec.t_sphere, t1, side='right')]
+        t = rec.t_sphere[rec.frames(t0, t1)]
         if len(t) >= 2 and t[-1] > t[0]:
             rates.append((len(t) - 1) / (t[-1] - t[0]))
             counts.append(len(t))

@@ -159,8 +159,7 @@ def first_frames_error(bag, truth, session, sides, counts=FIRST_FRAMES):
     out = {n: [] for n in counts}
     for k, stamp in enumerate(session.stamps):
         t0, t1 = windows.get(round(float(stamp), 6), (np.inf, -np.inf))
-        frames = rec.sphere[np.searchsorted(rec.t_sphere, t0):
-                            np.searchsorted(rec.t_sphere, t1, side='right')]
+        frames = rec.sphere[rec.frames(t0, t1)]
         if len(frames) >= max(counts):
             for n in counts:
                 out[n].append(frames[:n].mean(axis=0) - true[k])
