@@ -199,11 +199,9 @@ class SessionRunner:
         limit = session_limits.pose_time_limit(self.config)
         waited = None if self._clock_wait is None else self._wall() - self._clock_wait
         if waited is not None and waited > limit:
-            self.failure = (f'the clock stayed at 0 for {waited:.1f} s of wall time, longer than '
-                            f'a pose can last ({limit:.1f} s): no /clock message (is the '
-                            'simulator running, with sim_time on every node?)')
-            self._enter(DONE, t)
-            self.actions.append(('done', None))
+            self._stop(t, f'the clock stayed at 0 for {waited:.1f} s of wall time, longer than a '
+                          f'pose can last ({limit:.1f} s): no /clock message (is the simulator '
+                          'running, with sim_time on every node?)')
 
     def joint_state(self, t, Theta):
         """Take one /joint_states sample: the increments (rad) of the three joints."""
@@ -291,15 +289,19 @@ class SessionRunner:
         silent = session_limits.silent_inputs(silences, limit)
         if not silent:
             return False
-        self.failure = '; '.join(
+        self._stop(t, '; '.join(
             f'no message on {name} for {silences[name]:.1f} s ({t - self.last_input[name]:.1f} s '
             f'of robot time), longer than a pose can last ({limit:.1f} s): {INPUTS[name]}'
-            for name in silent)
+            for name in silent))
+        return True
+
+    def _stop(self, t, failure):
+        """Stop the session early, saying why: a rest being measured is closed first."""
+        self.failure = failure
         if self.state == MEASURING:
             self.actions.append(('rest_end', self.index))
         self._enter(DONE, t)
         self.actions.append(('done', None))
-        return True
 
     def _frame_period(self):
         """Return the seconds between detections: over the rests measured, or this one's."""

@@ -70,14 +70,23 @@ class TrueSides:
     @classmethod
     def of_bag(cls, bag, truth):
         """Read them from a bag's joint states (sim_truth.reading_sides, the truth's widths)."""
-        with bag_io.BagReader(bag) as reader:
-            rec = rests.read(reader, [])
+        return cls.of_recording(read_recording(bag), truth)
+
+    @classmethod
+    def of_recording(cls, rec, truth):
+        """Take them from a read bag's (rests.Recording) joint states, as ``of_bag``."""
         width = truth.effects.get('backlash', np.zeros(3))
         return cls(rec.t_joint, sim_truth.reading_sides(rec.Theta, width))
 
     def at(self, stamps):
         """Return the sides (K, 3) at the times ``stamps`` (K,), s: a rest's middle."""
         return self.sides[np.clip(np.searchsorted(self.t, stamps), 0, len(self.t) - 1)]
+
+
+def read_recording(bag):
+    """Return a bag's time series (rests.Recording)."""
+    with bag_io.BagReader(bag) as reader:
+        return rests.read(reader, [])
 
 
 def best_sides(truth, session, sides):
@@ -142,17 +151,16 @@ def holdout_truth_error_mm(d, meas, session, truth, model=None, sides=None):
     return float(np.sqrt(np.mean(diagnosis.position_errors(model, seen) ** 2)) * 1e3)
 
 
-def first_frames_error(bag, truth, session, sides, counts=FIRST_FRAMES):
+def first_frames_error(rec, truth, session, sides, counts=FIRST_FRAMES):
     """
     Return {n: (K', 3)} each marked rest's first n frames averaged, less the truth (m).
 
     How many frames a rest needs on the live chain: once the rests' own floor dominates, their
-    error against the truth stops falling with n (protocol.frames_per_rest's premise). Rests are
-    those of ``session`` (read with markers) with at least max(counts) frames; ``sides``: the
-    truth's backlash sides at them (TrueSides.at(session.stamps)).
+    error against the truth stops falling with n (protocol.frames_per_rest's premise). ``rec``:
+    the bag read (read_recording); rests are those of ``session`` (read with markers) with at
+    least max(counts) frames; ``sides``: the truth's backlash sides at them
+    (TrueSides.at(session.stamps)).
     """
-    with bag_io.BagReader(bag) as reader:
-        rec = rests.read(reader, [])
     windows = {round(0.5 * (t0 + t1), 6): (t0, t1) for t0, t1, _ in
                rests.marked_windows(rec.markers, [])}
     true = true_sphere(truth, session.Theta, sides)
@@ -214,7 +222,8 @@ def main(argv=None):
     args = parser.parse_args(argv)
     truth = sim_truth.load(args.truth)
     session, _ = rests.load_session(args.bag)
-    true_sides = TrueSides.of_bag(args.bag, truth)
+    rec = read_recording(args.bag)
+    true_sides = TrueSides.of_recording(rec, truth)
     sides = true_sides.at(session.stamps)
     print('optical x, y, z:')
     error = session.sphere - true_sphere(truth, session.Theta, sides)
@@ -228,7 +237,7 @@ def main(argv=None):
     for label, options in BIAS_SOURCES.items():
         b = detector_bias(C, truth.geometry.sphere_radius, 'model', **options)
         print(_line(f'detector bias (model), {label}', b[np.all(np.isfinite(b), axis=1)]))
-    for n, e in first_frames_error(args.bag, truth, session, sides).items():
+    for n, e in first_frames_error(rec, truth, session, sides).items():
         print(_line(f'rests minus truth, their first {n} frames', e))
     e, flipped = best_sides(truth, session, sides)
     print(_line(f'rests, best backlash sides ({flipped} of {3 * len(session)} flipped)', e))

@@ -87,7 +87,8 @@ def test_a_rests_first_frames_scatter_as_their_noise_about_the_truth(tmp_path):
     bag = session_bag.write(tmp_path / 'bag', session_bag.BagSpec(poses=40, seed=8))
     session, _ = rests.load_session(bag.path)
     truth = sim_truth.load()
-    errors = live_links.first_frames_error(bag.path, truth, session, session.direction)
+    errors = live_links.first_frames_error(live_links.read_recording(bag.path), truth, session,
+                                           session.direction)
     for n, e in errors.items():
         assert len(e) == len(session)
         chi2 = float(np.sum((e / session_bag.FRAME_SIGMA) ** 2) * n)
