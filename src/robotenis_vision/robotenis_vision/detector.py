@@ -123,7 +123,7 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=
             raise DetectionError(failures[0])
         raise DetectionError('no sphere: no round outline of a plausible size in the image')
     if len(found) == 1:
-        return _shadowed(img, camera, radius, found[0][0], gamma)
+        return found[0][0]
     views = [_model_view(img, camera, radius, d, c, gamma) for d, _, c in found]
     ranked = sorted(zip(found, views), key=lambda f: -f[0][1] * _clarity(f[1]))
     first = ranked[0][1]
@@ -133,33 +133,7 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=
         a, b = (camera.project(v.position) for v in (first, second))
         raise DetectionError(f'two balls in view, at pixels ({a[0]:.0f}, {a[1]:.0f}) and '
                              f'({b[0]:.0f}, {b[1]:.0f}): ambiguous, not measured')
-    return _shadowed(img, camera, radius, ranked[0][0][0], gamma)
-
-
-def _shadowed(img, camera, radius, det, gamma):
-    """
-    Return the model fit of the chosen ball made again with its light's shadow (model_fit.fit).
-
-    The candidates of a search are fitted without it: with a shadow's column a mark on the ball
-    (its terminator, its highlight) fits as well as the ball, which then missed the search, and
-    reads it a few times too far. The ball chosen is fitted with it from where it was found, and
-    again from where that fit ended while its outline moves REFIT_PX or more (at most REFITS
-    times: a fit lit from behind can leave the search's fit 2-3 % of the range off); if a fit
-    fails, the last one stands.
-    """
-    if det.method != 'model':
-        return det
-    for _ in range(1 + REFITS):
-        try:
-            fit = measure(img, camera, radius, 'model', det.position, det.extra['psf_sigma'],
-                          gamma, det.extra['noise_levels'])
-        except DetectionError:
-            return det
-        moved = max(model_fit.outline_offset(camera, radius, det.position, fit.position))
-        det = fit
-        if moved < REFIT_PX:
-            break
-    return det
+    return ranked[0][0][0]
 
 
 def moved_prior(camera, track, t):
@@ -202,8 +176,7 @@ def _near(img, camera, radius, method, c, gamma):
     if sphere is None or np.hypot(*(camera.project(sphere.c) - centre)) > NEAR * r:
         return None
     try:
-        return _shadowed(img, camera, radius, measure(img, camera, radius, method, sphere.c, None,
-                                                      gamma), gamma)
+        return measure(img, camera, radius, method, sphere.c, None, gamma)
     except DetectionError:
         return None
 
@@ -329,7 +302,6 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
     place; and a fit whose outline then moved REFIT_PX or more is made again from where it ended
     (at most REFITS times): its annulus was cut around the start, and a search's sphere a few
     pixels off (a part of the outline, a checkerboard's square beside it) leaves the fit halfway.
-    Fits from a search leave out the light's shadow (``_shadowed`` adds it to the ball chosen).
     A previous frame's ball is where it was: its fit is not made again (a wrong prior must fail,
     not wander to what lies beside it). From a previous frame's model fit, its ``noise_levels``
     settle the robust weights at once (model_fit.fit); its ``edge_fraction`` (extra
@@ -344,13 +316,12 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
         if from_search:
             first = model_fit.fit(img, camera, radius, c0, 1.5, gamma, iterations=4, limb=False)
             c0, blur = first.c, first.blur
-        fit = model_fit.fit(img, camera, radius, c0, blur, gamma, noise_levels=noise_levels,
-                            shadow=not from_search)
+        fit = model_fit.fit(img, camera, radius, c0, blur, gamma, noise_levels=noise_levels)
         for _ in range(REFITS if from_search else 0):
             if max(model_fit.outline_offset(camera, radius, c0, fit.c)) < REFIT_PX:
                 break
             c0 = fit.c
-            fit = model_fit.fit(img, camera, radius, c0, fit.blur, gamma, shadow=False)
+            fit = model_fit.fit(img, camera, radius, c0, fit.blur, gamma)
         covered = fit.coverage()
         flips = fit.polarity_flips()
         limb = fit.limb_variation()

@@ -31,19 +31,10 @@ taken at t - s^2 kappa / 2: a blurred curved step appears that much inside the o
 curvature). The t^1.5 term is cos(i)'s next one: on a circle of radius 1 / kappa, cos^2(i) =
 2 kappa t - kappa^2 t^2, so cos(i) = sqrt(2 kappa t) (1 - kappa t / 4 - ...). Left unblurred it
 moved the outline of a frontally lit 19 px ball over a darker background by a tenth of a pixel
-at a blur of 1 px (0.46 % of the range, 0.12 % with it; noise-free renders).
-
-The shadow. Where the terminator crosses the limb the shading is clamped: amb + D max(0, n.l) =
-amb + D n.l + D max(0, -n.l). The first two terms are the model's above; the last is zero on the
-lit side and D (-(m.l) sin(i) - (v.l) cos(i)) in the shadow, so beta is D (v.l) on one side of
-the outline and 0 on the other, which its three coefficients cannot follow. Lit from behind
-(only a crescent along the limb lit), glossy balls of the project's renderer were read 2-3 % of
-the range too far (a second minimum the search's start fell into), and the tests' Lambertian
-ball 0.27 % too near. The light's direction l is read from the disc inside the annulus
-(``disc_light``: a hinge regression A + max(0, n.L)), and the shadow's part is one more global
-column, [n.l < 0] (-(m.l) sin(i) - (v.l) cos(i)), blurred as its two terms are, with its own
-coefficient (D for a Lambertian ball; what fits for another). Known limit: a lens's defocus is
-a disc, not the Gaussian assumed (benchmarks/vision.py measures it).
+at a blur of 1 px (0.46 % of the range, 0.12 % with it; noise-free renders). Known limits:
+where the terminator crosses the limb the shading is clamped (max(0, n.l)) and this model
+misreads it; a lens's defocus is a disc, not the Gaussian assumed (benchmarks/vision.py measures
+both).
 
 Geometry. The outline is the cone of rays touching the sphere, q(u) = (r.c)^2 - (c.c - R^2) r.r = 0
 for the ray r = K^-1 (u, 1) of an ideal (undistorted) pixel u (C1 of robotenis_vision.conic). A
@@ -76,8 +67,6 @@ SATURATED = (0.5, 254.5)       # grey levels: a pixel at the sensor's limit is n
 BLUR_RANGE = (0.25, 4.0)       # px: the edge spread the fit may settle on
 INNER = 0.2                    # of the ball's apparent radius: how deep inside the annulus goes
 MIN_PIXELS = 60
-LIGHT_SIGNIFICANT = 5.0        # standard errors of |L| for a disc's light to cast a shadow column
-LIGHT_SHARE = 0.1              # and its share of the lit side's level, A + |L|, at least
 MAX_STEP_PX = 1.0              # outline displacement a Gauss-Newton step may make
 SCALE_FLOOR = 1.0              # grey levels: the least residual scale the weights assume
 N_LEVELS = 8                   # per bin: b0, b1, a0, a1 and their slopes along the bin
@@ -185,19 +174,17 @@ def _ellipse(Qpx):
     return centre, M
 
 
-def _box(camera, c, R, outer):
+def annulus(img, camera, c, R, outer, inner):
     """
-    Return the box of pixels of sphere c's disc and ``outer`` px around it.
+    Cut the pixels from ``outer`` px outside sphere c's outline to ``inner`` px inside it.
 
-    (lo, hi) the box's corners (px), the outline's ellipse (centre, M, axes), each box pixel's
-    ideal position (m, 2), its distance inside the outline (px, along the ray from the centre)
-    and the slack that distance needs for the normal's slant. DetectionError when the box leaves
-    the image.
+    DetectionError when the annulus leaves the image (the sphere touches its border) or holds too
+    few pixels.
     """
     centre, M = _ellipse(outline_conic(camera, c, R))
     values, V = np.linalg.eigh(M)
     axes = 1 / np.sqrt(values)
-    ideal_map = _ideal_maps(camera_key(camera))[0]
+    ideal_map, stretch_map = _ideal_maps(camera_key(camera))
     t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
     outline = centre + (np.stack([np.cos(t), np.sin(t)], 1) * axes) @ V.T
     image_outline = camera.distort_pixels(outline)
@@ -211,21 +198,9 @@ def _box(camera, c, R, outer):
     # distance from the outline along the ray from the centre, with slack for the normal's slant
     slack = 1 + 0.1 * (axes.max() / axes.min() - 1)
     dist = (1 - rho) * np.linalg.norm(d, axis=1) / np.maximum(rho, 1e-9)
-    return lo, hi, (centre, M, axes), ideal, dist, slack
-
-
-def annulus(img, camera, c, R, outer, inner):
-    """
-    Cut the pixels from ``outer`` px outside sphere c's outline to ``inner`` px inside it.
-
-    DetectionError when the annulus leaves the image (the sphere touches its border) or holds too
-    few pixels.
-    """
-    lo, hi, (centre, M, axes), ideal, dist, slack = _box(camera, c, R, outer)
-    stretch_map = _ideal_maps(camera_key(camera))[1]
-    d = ideal - centre
-    index = np.flatnonzero((dist < inner * slack + 0.5) & (dist > -outer * slack - 0.5))
+    keep = (dist < inner * slack + 0.5) & (dist > -outer * slack - 0.5)
     width = hi[0] - lo[0] + 1
+    index = np.flatnonzero(keep)
     if len(index) < MIN_PIXELS:
         raise DetectionError(f'only {len(index)} pixels around the outline')
     vv, uu = np.divmod(index, width)
@@ -246,79 +221,16 @@ def annulus(img, camera, c, R, outer, inner):
     slot = np.arange(len(index)) - starts[bins]
     gather = np.full((len(present), counts.max()), -1)
     gather[bins, slot] = np.arange(len(index))
-    position = np.full(len(ideal), -1)
+    position = np.full(keep.size, -1)
     position[index] = np.arange(len(index))
     nxt = index + 1
-    right = np.where(nxt % width != 0, position[np.minimum(nxt, len(ideal) - 1)], -1)
+    right = np.where(nxt % width != 0, position[np.minimum(nxt, keep.size - 1)], -1)
     stretch = (None if stretch_map is None
                else stretch_map[lo[1]:hi[1] + 1, lo[0]:hi[0] + 1].reshape(-1, 2, 2)[index])
     usable = (vals > SATURATED[0]) & (vals < SATURATED[1])
     bin_angle = (present + 0.5) / n_bins * 2 * np.pi - np.pi
     return Annulus(vals, ideal[index], stretch, bins, gather, angle, bin_angle, along, right,
                    usable)
-
-
-@dataclass
-class Light:
-    """A distant light on a Lambertian ball: A + max(0, n . L) over its disc, linear units."""
-
-    A: float                 # the ambient level
-    L: np.ndarray            # (3,) toward the light, times its diffuse level, optical frame
-    sd: float                # standard error of |L|
-
-
-def surface_normals(camera, ideal, c, R):
-    """Return the unit normals (n, 3) where the rays of ideal pixels (n, 2) meet sphere c first."""
-    r = np.column_stack([ideal, np.ones(len(ideal))]) @ np.linalg.inv(camera.K).T
-    d = r / np.linalg.norm(r, axis=1)[:, None]
-    b = d @ c
-    t = b - np.sqrt(np.maximum(b * b - (c @ c - R * R), 0.0))
-    return (t[:, None] * d - c) / R
-
-
-def disc_light(img, camera, c, R, gamma=1.0, margin=2.0, iterations=12):
-    """
-    Fit one distant light to the ball's disc deeper than ``margin`` px inside its outline.
-
-    A + max(0, n . L) at each pixel (n the surface normal its ray meets; the image linearised by
-    ``gamma``): a hinge regression, solved as least squares on the pixels n . L lights until they
-    repeat, with Tukey's biweight for a highlight. None when the disc has too few pixels, or |L|
-    is within LIGHT_SIGNIFICANT standard errors of 0 or below LIGHT_SHARE of A + |L| (an unlit
-    ball, a light all around it; the blur's edge, which darkens or brightens the disc's rim,
-    reads as a faint light).
-    """
-    c = np.asarray(c, dtype=float)
-    lo, hi, _, ideal, dist, slack = _box(camera, c, R, 0.0)
-    inside = np.flatnonzero(dist > margin * slack)
-    if len(inside) < MIN_PIXELS:
-        return None
-    vv, uu = np.divmod(inside, hi[0] - lo[0] + 1)
-    values = np.asarray(img, dtype=float)[vv + lo[1], uu + lo[0]]
-    y, w0 = linearise(values, gamma)
-    w0 = w0 * ((values > SATURATED[0]) & (values < SATURATED[1]))
-    n = surface_normals(camera, ideal[inside], c, R)
-    # the lit pixels are the bright ones to start with: from all of them, a light from behind
-    # (lighting a crescent) ends with none lit
-    lit, w = y > np.mean(np.percentile(y, [10, 90])), w0
-    for it in range(iterations):
-        X = np.column_stack([np.ones(len(y)), n * lit[:, None]])
-        N = X.T @ (X * w[:, None])
-        N_inv = np.linalg.pinv(N, hermitian=True)
-        coef = N_inv @ (X.T @ (w * y))
-        r = (y - X @ coef) * np.sqrt(w0)
-        scale = max(1.4826 * np.median(np.abs(r[w0 > 0])), SCALE_FLOOR)
-        u = r / (TUKEY * scale)
-        w = w0 * np.where(np.abs(u) < 1, (1 - u * u) ** 2, 0.0)
-        now = n @ coef[1:] > 0
-        if it >= 2 and np.array_equal(now, lit):
-            break
-        lit = now
-    L = coef[1:]
-    size = float(np.linalg.norm(L))
-    sd = float(scale * np.sqrt(max(L @ N_inv[1:, 1:] @ L, 0.0)) / max(size, 1e-300))
-    if not size > max(LIGHT_SIGNIFICANT * sd, LIGHT_SHARE * (coef[0] + size)):
-        return None
-    return Light(float(coef[0]), L, sd)
 
 
 @dataclass
@@ -331,18 +243,10 @@ class Geometry:
     w2_slope: np.ndarray     # (n,) d cos^2(i) / dt at the outline, 1 / image px
     cos_deep: np.ndarray     # (n,) cos(i) - sqrt(w2' t) (1 - kappa t / 4) inside, 0 outside
     sin_deep: np.ndarray     # (n,) sin(i) - 1 + w2' t / 2 inside, 0 outside
-    # a Light's shadow: m.l and v.l at each pixel (l its direction), and whether n.l < 0 there
-    ml: np.ndarray = None
-    vl: np.ndarray = None
-    shadow: np.ndarray = None
 
 
-def geometry(ann, camera, c, R, light=None):
-    """
-    Compute each pixel's distance to sphere c's outline, its derivative, curvature, shading.
-
-    ``light`` (a Light, or None): where its shadow falls on the ball, for the shadow's column.
-    """
+def geometry(ann, camera, c, R):
+    """Compute each pixel's distance to sphere c's outline, its derivative, curvature, shading."""
     c = np.asarray(c, dtype=float)
     Kinv = np.linalg.inv(camera.K)
     Qpx = outline_conic(camera, c, R)
@@ -376,18 +280,7 @@ def geometry(ann, camera, c, R, light=None):
                         - np.sqrt(w2_slope * depth) * (1 - 0.25 * kappa * depth), 0.0)
     sin_deep = np.where(inside, np.sqrt(np.clip(1 - w2, 0, 1)) - 1 + 0.5 * w2_slope * depth,
                         0.0)
-    geo = Geometry(d, dd_dc, kappa, w2_slope, cos_deep, sin_deep)
-    if light is not None:
-        # at the limb n = m, the outline's normal in space: the foot point's ray's nearest
-        # approach to c, seen from c; inside, n is the normal the pixel's ray meets
-        toward = light.L / np.linalg.norm(light.L)
-        rays = r / np.linalg.norm(r, axis=1)[:, None]
-        m = (rays @ c)[:, None] * rays - c
-        geo.ml = (m @ toward) / np.linalg.norm(m, axis=1)
-        geo.vl = -(rp / np.linalg.norm(rp, axis=1)[:, None]) @ toward
-        n_l = np.where(inside, surface_normals(camera, ann.ideal, c, R) @ toward, geo.ml)
-        geo.shadow = n_l < 0
-    return geo
+    return Geometry(d, dd_dc, kappa, w2_slope, cos_deep, sin_deep)
 
 
 def columns(geo, ann, s):
@@ -395,8 +288,8 @@ def columns(geo, ann, s):
     Return the model's columns at blur s and their derivatives in t and s.
 
     X (n, 8): the bins' levels' (b0, b1, a0, a1, then each times the position along the bin);
-    H (n, 3): the limb's square-root term's (beta0, beta1 cos(phi), beta2 sin(phi)), and a
-    fourth, the shadow's, when ``geo`` has a light's; dX_dt, dX_ds, dH_dt, dH_ds the same shapes.
+    H (n, 3): the limb's square-root term's (beta0, beta1 cos(phi), beta2 sin(phi)); dX_dt,
+    dX_ds, dH_dt, dH_ds the same shapes.
     """
     t = geo.d - 0.5 * s * s * geo.kappa
     tau = t / s
@@ -414,17 +307,12 @@ def columns(geo, ann, s):
     h = root * (np.sqrt(s) * g + k3 * s ** 1.5 * g3) + geo.cos_deep
     dh_dt = root * (dg / np.sqrt(s) + k3 * np.sqrt(s) * dg3)
     dh_ds = root * ((0.5 * g - tau * dg) / np.sqrt(s) + k3 * np.sqrt(s) * (1.5 * g3 - tau * dg3))
-    fourier = np.stack([np.ones(len(t)), np.cos(ann.angle), np.sin(ann.angle)], axis=1)
-    H, dH_dt, dH_ds = fourier * h[:, None], fourier * dh_dt[:, None], fourier * dh_ds[:, None]
-    if geo.shadow is not None:
-        # sin(i) H(t) blurred is a0's column plus a1's; the shadow's kink inside is left sharp
-        shade = [(-geo.ml * (Xk[:, 2] + Xk[:, 3]) - geo.vl * hk) * geo.shadow
-                 for Xk, hk in ((X, h), (dX_dt, dh_dt), (dX_ds, dh_ds))]
-        H, dH_dt, dH_ds = (np.column_stack([M, v]) for M, v in zip((H, dH_dt, dH_ds), shade))
     a = ann.along[:, None]
     X, dX_dt, dX_ds = (np.hstack([m, m * a]) for m in (X, dX_dt, dX_ds))
+    fourier = np.stack([np.ones(len(t)), np.cos(ann.angle), np.sin(ann.angle)], axis=1)
     shift = -s * geo.kappa[:, None]          # the curvature shift moves with s: dt/ds = -s kappa
-    return X, H, dX_dt, dX_ds + dX_dt * shift, dH_dt, dH_ds + dH_dt * shift
+    return (X, fourier * h[:, None], dX_dt, dX_ds + dX_dt * shift, fourier * dh_dt[:, None],
+            fourier * (dh_ds[:, None] + dh_dt[:, None] * shift))
 
 
 def _solve(X, G, y, w, ann):
@@ -467,8 +355,7 @@ class ModelFit:
     cov: np.ndarray                # (3, 3) its covariance, m^2
     blur: float                    # px: the edge spread fitted (lens and pixel)
     noise: float                   # grey levels (linearised): the pixel noise estimated
-    beta: np.ndarray               # (3,) the limb's square-root shading coefficients, (4,) with
-    #                                the shadow's (``light`` found)
+    beta: np.ndarray               # (3,) the limb's square-root shading coefficients
     levels: np.ndarray             # (n_bins, 8) per bin
     step_sd: np.ndarray            # (n_bins,) standard error of each bin's step a0 - b0
     weights: np.ndarray            # (n,) weight of each annulus pixel
@@ -582,7 +469,7 @@ def linearise(values, gamma):
 
 
 def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=True,
-        noise_levels=None, shadow=True):
+        noise_levels=None):
     """
     Fit the sphere of radius R to the image from a start c0 (m) whose outline is a pixel or so off.
 
@@ -594,7 +481,6 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
     ``noise_levels``: a previous fit's of the same scene (ModelFit.noise_levels, a frame before at
     rest): the robust scale and the zones' noise start there instead of being found in the first
     iterations, so that the weights are settled from the first step (half the iterations).
-    ``shadow``: read the light from the disc and fit its shadow's column (with ``limb``).
     """
     c = np.asarray(c0, dtype=float).copy()
     s = float(np.clip(blur0, *BLUR_RANGE))
@@ -603,9 +489,7 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
     ann = annulus(img, camera, c, R, outer, max(2.5, INNER * r_px))
     y, w0 = linearise(ann.values, gamma)
     w0 = w0 * ann.usable
-    # the light is read from the disc beyond the blur's reach of the outline
-    light = disc_light(img, camera, c, R, gamma, 0.5 * s + 0.5) if limb and shadow else None
-    geo = geometry(ann, camera, c, R, light)
+    geo = geometry(ann, camera, c, R)
     X, H = columns(geo, ann, s)[:2]
     H = H if limb else H[:, :0]
     beta, levels = _solve(X, H, y, w0, ann)[:2]
@@ -649,7 +533,7 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
         dc *= min(1.0, MAX_STEP_PX / max(np.max(np.abs(geo.dd_dc @ dc)), 1e-12))
         c = c + dc
         s = float(np.clip(s + np.clip(ds, -s / 3, s / 3), *BLUR_RANGE))
-        geo = geometry(ann, camera, c, R, light)
+        geo = geometry(ann, camera, c, R)
         sd = np.sqrt(np.maximum(np.diag(S_inv)[:3], 1e-30)) * noise
         if np.all(np.abs(dc) < tol * sd) and abs(ds) < 1e-3 and it >= 2:
             break

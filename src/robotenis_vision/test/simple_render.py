@@ -78,39 +78,3 @@ def checkerboard(camera, square, low=40.0, high=210.0):
     """Float image of a checkerboard of ``square`` px squares."""
     v, u = np.mgrid[0:camera.height, 0:camera.width]
     return np.where((u // square + v // square) % 2 == 0, low, high).astype(float)
-
-
-def lambertian(camera, C, R, light, rng, ambient=30.0, diffuse=180.0, background=110.0,
-               blur_sigma=0.8, noise_sigma=2.0, scale=16):
-    """
-    uint8 image of a Lambertian ball, ambient + diffuse max(0, n . light), on a flat background.
-
-    A pinhole camera (its distortion ignored); each pixel is the mean of scale x scale rays,
-    each shaded where it meets the sphere first: the shadow's edge (the terminator) is as sharp
-    as the light makes it.
-    """
-    C = np.asarray(C, dtype=float)
-    uv = project(camera, outline_points(C, R))
-    lo = np.maximum(np.floor(uv.min(axis=0)).astype(int) - 8, 0)
-    hi = np.minimum(np.ceil(uv.max(axis=0)).astype(int) + 8, [camera.width, camera.height])
-    offsets = (np.arange(scale) + 0.5) / scale - 0.5
-    u = (np.arange(lo[0], hi[0])[:, None] + offsets).ravel()
-    v = (np.arange(lo[1], hi[1])[:, None] + offsets).ravel()
-    x = (u[None, :] - camera.K[0, 2]) / camera.K[0, 0]
-    y = (v[:, None] - camera.K[1, 2]) / camera.K[1, 1]
-    norm = np.sqrt(x * x + y * y + 1.0)
-    d = np.stack(np.broadcast_arrays(x / norm, y / norm, 1.0 / norm), axis=-1)
-    b = d @ C
-    disc = b * b - (C @ C - R * R)
-    t = b - np.sqrt(np.maximum(disc, 0.0))
-    n = (t[..., None] * d - C) / R
-    lit = ambient + diffuse * np.maximum(n @ (np.asarray(light) / np.linalg.norm(light)), 0.0)
-    fine = np.where(disc > 0, lit, background).astype(np.float32)
-    image = np.full((camera.height, camera.width), background, np.float32)
-    image[lo[1]:hi[1], lo[0]:hi[0]] = cv2.resize(fine, tuple(hi - lo),
-                                                 interpolation=cv2.INTER_AREA)
-    if blur_sigma > 0:
-        image = cv2.GaussianBlur(image, (0, 0), blur_sigma)
-    if noise_sigma > 0:
-        image += noise_sigma * rng.standard_normal(image.shape).astype(np.float32)
-    return np.clip(np.rint(image), 0, 255).astype(np.uint8)

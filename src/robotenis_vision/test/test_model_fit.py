@@ -5,7 +5,6 @@ from robotenis_vision import camera, model_fit
 from scipy.integrate import quad
 from scipy.special import i0e
 from scipy.stats import norm
-import simple_render
 
 R = 0.019
 F = 500.0
@@ -75,39 +74,3 @@ def test_a_fit_that_wanders_over_a_flat_patch_shows_no_edge():
     step = np.abs(fit.levels[:, 2] - fit.levels[:, 0])
     assert np.mean(step > np.maximum(8.0, 4 * noise_only)) > 0.5     # what the noise alone allows
     assert fit.coverage() == 0.0
-
-
-def test_the_disc_light_is_the_one_that_lit_the_ball():
-    # the test's own renderer: a Lambertian ball lit from the left and a little from the camera
-    C, light = np.array([0.03, -0.02, 0.3]), np.array([-1.0, 0.2, -0.3])
-    img = simple_render.lambertian(PINHOLE, C, R, light, np.random.default_rng(1))
-    # beyond the blur's reach (0.8 px): the disc alone, as the renderer shaded it
-    lit = model_fit.disc_light(img, PINHOLE, C, R, 1.0, 3 * 0.8)
-    toward = light / np.linalg.norm(light)
-    assert abs(np.linalg.norm(lit.L) - 180.0) < 5 * lit.sd
-    # across the light, its standard error is about |L|'s over |L| (rad)
-    assert np.arccos(lit.L @ toward / np.linalg.norm(lit.L)) < 5 * lit.sd / np.linalg.norm(lit.L)
-    assert lit.A == pytest.approx(30.0, abs=5 * lit.sd)
-
-
-def test_the_shadow_column_takes_out_most_of_a_back_lit_balls_bias(monkeypatch):
-    # lit from behind, only a crescent along the limb is lit and the rest of the limb is in
-    # shadow: the square root's coefficient is D (v.l) on the crescent and 0 elsewhere, which
-    # the limb's three coefficients cannot follow (0.27 % of the range too near without the
-    # shadow's column, 0.12 % with it, in six frames of 2 grey levels of noise)
-    C = np.array([0.03, -0.02, 0.3])
-    u = C / np.linalg.norm(C)
-    images = [simple_render.lambertian(PINHOLE, C, R, (0.5, 0.3, 0.8), np.random.default_rng(k))
-              for k in range(6)]
-
-    def depth_errors():
-        fits = [model_fit.fit(img, PINHOLE, R, 1.002 * C, 0.9) for img in images]
-        return (np.array([(f.c - C) @ u for f in fits]),
-                np.mean([np.sqrt(u @ f.cov @ u) for f in fits]))
-
-    with_light, sd = depth_errors()
-    monkeypatch.setattr(model_fit, 'disc_light', lambda *args: None)
-    without, _ = depth_errors()
-    # the same images: the difference of the means has at most sqrt(2) times one mean's error
-    gain = abs(without.mean()) - abs(with_light.mean())
-    assert gain > 3 * np.sqrt(2) * sd / np.sqrt(len(images))
