@@ -519,16 +519,36 @@ class _Loop:
             return [best.name]
         name, size, used = best.name, best.size, [best.name]
         if name in NAMED:
-            name, size, trial, used = self.attribute(step, best, trial, tests)
+            name, size, trial, used = self.claim_named(step, best, trial, tests, significant)
             if name is None:
                 return used
-            if name == best.name:
-                name, trial = self.distinguish(step, best, trial, significant)
-                used = [name]
         step.kept = True
         step.reason = step.reason or 'fit and held-out poses improved significantly'
         self.accept(name, size, trial)
         return used
+
+    def claim_named(self, step, best, trial, tests, significant):
+        """
+        Return (effect or None, size, fit, candidates used up) for a named effect that helped.
+
+        ``attribute`` confronts it with the generic effects and, if it stands, ``distinguish``
+        with the other named ones. A named rival claimed instead meets the generic effects in its
+        turn: it stands, or a generic that explains it is claimed; if neither does, ``best``
+        stands (no generic explained it).
+        """
+        claim = self.attribute(step, best, trial, tests)
+        if claim[0] != best.name:
+            return claim
+        rival, rival_trial = self.distinguish(step, best, trial, significant)
+        if rival is best:
+            return claim
+        reason = step.reason
+        name, size, fit, used = self.attribute(step, rival, rival_trial, tests)
+        if name is not None:
+            return name, size, fit, used
+        step.chosen = best.name
+        step.reason = f'{reason}; but {step.reason}: {best.name} stands'
+        return claim
 
     def attribute(self, step, best, trial, tests):
         """
@@ -575,7 +595,7 @@ class _Loop:
 
     def distinguish(self, step, best, trial, significant):
         """
-        Return (effect, its fit): ``best`` or another named effect that explains more.
+        Return (test, its fit): ``best`` or another named effect's that explains more.
 
         Encompassing tests between the named candidates significant this round, as ``attribute``
         runs them against the generic ones: does the rival add to ``best`` (score test at best's
@@ -596,7 +616,7 @@ class _Loop:
                                f'{adds:.3g}) and {best.name} adds nothing to {rival.name} (p = '
                                f'{gains:.3g}): {rival.name} is claimed')
                 step.equivalent = []
-                return rival.name, rival_fit
+                return rival, rival_fit
             if gains >= self.alpha and adds >= self.alpha:
                 step.equivalent.append((rival.name, adds, gains))
         if step.equivalent:
@@ -604,7 +624,7 @@ class _Loop:
                            'tell it from ' + ', '.join(
                                f'{n} (neither adds to the other: p = {a:.2g}, {g:.2g})'
                                for n, a, g in step.equivalent))
-        return best.name, trial
+        return best, trial
 
     def accept(self, name, size, trial):
         self.found.append(name)

@@ -1,4 +1,6 @@
 """The residual loop on static sessions whose truth carries an undeclared effect."""
+import types
+
 import numpy as np
 import pytest
 from robotenis_calibration import diagnosis, poses, result
@@ -200,3 +202,46 @@ def test_pearson_is_scipys_pearsonr():
             y = c * x + rng.normal(size=n)
             np.testing.assert_allclose(diagnosis.pearson(x, y), stats.pearsonr(x, y),
                                        rtol=1e-8, atol=1e-300)
+
+
+class _Rounds:
+    """A loop whose encompassing tests are scripted: what attribute says of each name."""
+
+    def __init__(self, verdicts, rival):
+        self.verdicts, self.rival, self.attributed = verdicts, rival, []
+
+    def attribute(self, step, test, trial, tests):
+        self.attributed.append(test.name)
+        name = self.verdicts[test.name]
+        if name is None:
+            step.reason = f'{test.name} is not claimed'
+        return name, None, f'{name} fit', [test.name]
+
+    def distinguish(self, step, best, trial, significant):
+        if self.rival is None:
+            return best, trial
+        step.chosen = self.rival.name
+        return self.rival, f'{self.rival.name} fit'
+
+
+@pytest.mark.parametrize('verdict, claimed', [('base_geometry', 'base_geometry'),
+                                              ('generic_a', 'generic_a'),
+                                              (None, 'hand_eye_rotation')])
+def test_a_named_rival_claimed_instead_meets_the_generic_effects_too(verdict, claimed):
+    # distinguish prefers base_geometry to hand_eye_rotation: it is confronted with the generic
+    # effects as hand_eye_rotation was; if one explains it and is not confirmed, the first stands
+    best, rival = (types.SimpleNamespace(name=n) for n in ('hand_eye_rotation', 'base_geometry'))
+    loop = _Rounds({'hand_eye_rotation': 'hand_eye_rotation', 'base_geometry': verdict}, rival)
+    step = types.SimpleNamespace(reason=None, chosen=None)
+    name = diagnosis._Loop.claim_named(loop, step, best, 'best fit', [], [])[0]
+    assert loop.attributed == ['hand_eye_rotation', 'base_geometry']
+    assert name == claimed
+    assert verdict is not None or step.chosen == 'hand_eye_rotation'
+
+
+def test_a_named_effect_no_rival_explains_better_is_attributed_once():
+    best = types.SimpleNamespace(name='backlash')
+    loop = _Rounds({'backlash': 'backlash'}, None)
+    step = types.SimpleNamespace(reason=None, chosen=None)
+    assert diagnosis._Loop.claim_named(loop, step, best, 'fit', [], [])[0] == 'backlash'
+    assert loop.attributed == ['backlash']
