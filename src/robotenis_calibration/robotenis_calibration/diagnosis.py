@@ -27,7 +27,9 @@ The residual loop: find what the model lacks, add it, and prove it helped on hel
    generic stands and the name must still add on top of it in a later round to be claimed.
    It is then confronted with the other significant named effects in the same way: a rival
    that adds to it where it adds nothing to the rival explains more and is claimed instead (if
-   it improves the held-out poses); a rival that neither adds to it nor gains from it is the
+   it improves the held-out poses, and after it has met the generic ones as the first did; if
+   a generic explains it, that generic or, unconfirmed, the first stands); a rival that
+   neither adds to it nor gains from it is the
    same explanation on these poses, and is reported beside the claim as indistinguishable
    (``Step.equivalent``), not silently lost to a score a fraction higher. After each effect
    kept the floor is learned again; repeat until no candidate is left significant.
