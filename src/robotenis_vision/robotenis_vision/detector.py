@@ -15,11 +15,13 @@ Methods (all return the sphere centre in the optical frame, m, with a covariance
 
 Without a prior the balls are looked for (robotenis_vision.search): open discs, sharp round
 outlines and radial-symmetry votes give candidates, the steep points of rays from each must agree
-on one sphere of the known radius (RANSAC), and the best of those are measured; each must show
-its edge around MIN_ARC of its outline; a sphere seen on a bigger ball's disc is a mark on it
-(_on_ball), not a ball. Two balls measured in the image, each clear to the model
-fit (its edge around the outline, its pixels kept: SECOND_BALL) and alike (contrast and blur:
-_alike), make it ambiguous: it is refused (DetectionError), by every method. With a prior (the
+on one sphere of the known radius (RANSAC); the spheres whose outline shows the longest arc of
+edge on one ellipse (round_arc: a checkerboard's square meets its inscribed circle only near
+four points) are measured; each must show its edge around MIN_ARC of its outline; a sphere seen
+on a bigger ball's disc is a mark on it (_on_ball), not a ball. Two balls measured in the image,
+each clear to the model fit (its edge around the outline, its pixels kept: SECOND_BALL), alike
+(contrast and blur: _alike) and round alike (SECOND_ROUND), make it ambiguous: it is refused
+(DetectionError), by every method. With a prior (the
 previous frame's Detection), the outline is measured where it was, and the search runs only if
 it is not found there.
 
@@ -36,7 +38,7 @@ from robotenis_vision import baseline, conic, edges, model_fit, paper_method, se
 from robotenis_vision.detection import Detection, DetectionError, RANGE
 
 METHODS = ('model', 'conic', 'paper', 'tangent', 'baseline')
-MIN_SCORE = 0.5                # of the rays from a candidate must agree on its sphere
+MIN_SCORE = 0.4                # of the rays from a candidate must agree on its sphere
 MEASURED = 3                   # confirmed spheres measured, best first
 MAX_RMS = 2.5                  # model fit: residual RMS over the noise beyond which it misfits
 MIN_KEPT = 0.6                 # model fit: of the pixels its robust weights must keep
@@ -47,6 +49,7 @@ MAX_FLIPS = 6                  # sign changes of the edge's step around the outl
 MAX_LIMB_VARIATION = 0.3
 SECOND_BALL = 0.75             # a ball this clear (_clarity) makes a second one ambiguous
 SECOND_STEP, SECOND_BLUR = 0.5, 2.0   # and if alike (_alike)
+SECOND_ROUND = 0.5             # and round over this much of the first's share
 MIN_ARC_MODEL = np.deg2rad(160)  # the model fits the known sphere to a shorter arc
 RAY_SPACING = 1.5              # px between profiles along the outline
 MIN_EDGE_POINTS = 16
@@ -58,6 +61,7 @@ PRIOR_KEEP = 0.8               # or this much of the prior's own fraction, if th
 NEAR = 0.5                     # of its apparent radius: how far _near finds a ball it lost
 TRACK_GAP = 0.05               # s: detections further apart give no velocity to move a prior by
 TRACK_MIN_SHIFT = 0.5          # px: a prior predicted to move less stays where it was
+ROUND_FLOOR_PX = 0.1           # round_arc: the profile edge's own bias on a shaded ball, px
 
 
 def check_image(image, camera):
@@ -117,7 +121,7 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=
             continue
         found = [f for f in found if not _on_ball(camera, f[0].position, det.position, radius)]
         if not any(_same_ball(camera, det.position, d.position, radius) for d, _, _ in found):
-            found.append((det, sphere.score, sphere.c))
+            found.append((det, sphere.round_arc, sphere.c))
     if not found:
         if failures:
             raise DetectionError(failures[0])
@@ -126,14 +130,15 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=
         return found[0][0]
     views = [_model_view(img, camera, radius, d, c, gamma) for d, _, c in found]
     ranked = sorted(zip(found, views), key=lambda f: -f[0][1] * _clarity(f[1]))
-    first = ranked[0][1]
-    others = [v for _, v in ranked[1:] if _clarity(v) >= SECOND_BALL]
-    if _clarity(first) >= SECOND_BALL and any(_alike(first, v) for v in others):
-        second = next(v for v in others if _alike(first, v))
+    (top, first), rest = ranked[0], ranked[1:]
+    share = _round_share(camera, radius, top)
+    second = next((v for f, v in rest if _clarity(v) >= SECOND_BALL and _alike(first, v)
+                   and _round_share(camera, radius, f) >= SECOND_ROUND * share), None)
+    if _clarity(first) >= SECOND_BALL and second is not None:
         a, b = (camera.project(v.position) for v in (first, second))
         raise DetectionError(f'two balls in view, at pixels ({a[0]:.0f}, {a[1]:.0f}) and '
                              f'({b[0]:.0f}, {b[1]:.0f}): ambiguous, not measured')
-    return ranked[0][0][0]
+    return top[0]
 
 
 def moved_prior(camera, track, t):
@@ -202,6 +207,12 @@ def _clarity(view):
     return view.extra['coverage'] / (2 * np.pi) * view.extra['kept']
 
 
+def _round_share(camera, radius, found):
+    """Return the share of a found ball's outline on one ellipse: (det, round_arc, c) -> 0 to 1."""
+    _, arc, c = found
+    return arc / (2 * np.pi * camera.apparent_radius(c, radius))
+
+
 def _alike(a, b):
     """
     Return whether two model Detections are alike enough for the image to be ambiguous.
@@ -233,9 +244,10 @@ def find(img, camera, radius):
     The candidates of robotenis_vision.search (the rough circle of edges.rough_circle first, which
     a clean image gives fastest; then the open discs, the sharp outlines, the coarse votes; less
     any lying within the disc of a bigger one, as a highlight or a shading feature on the ball
-    does, which measured as a ball reads it a few times too far) are confirmed by their rays; at
-    most MEASURED distinct spheres with MIN_SCORE of their rays on the outline, within RANGE of
-    the camera.
+    does, which measured as a ball reads it a few times too far) are confirmed by their rays:
+    distinct spheres with MIN_SCORE of their rays on the outline, within RANGE of the camera. The
+    MEASURED with the longest round_arc are returned, longest first: the rays' score counts any
+    steep point within a pixel, and a checkerboard's square scores as high as the ball.
     """
     r_min, r_max = camera.fx * radius / RANGE[1], camera.fx * radius / RANGE[0]
     found = (search.open_discs(img, r_min, r_max) + search.sharp_candidates(img, r_min, r_max)
@@ -261,7 +273,8 @@ def find(img, camera, radius):
                 spheres[same[0]] = sphere
             continue
         spheres.append(sphere)
-    spheres.sort(key=lambda s: -s.score)
+    spheres = [replace(s, round_arc=round_arc(img, camera, radius, s.c)) for s in spheres]
+    spheres.sort(key=lambda s: -s.round_arc)
     return spheres[:MEASURED]
 
 
@@ -418,6 +431,37 @@ def outline(img, camera, radius, c, blur, prior_fraction=None):
     points = pts[keep] + fit.e[keep, None] * normals[keep]
     fields = ('e', 'sigma_e', 'contrast', 'rms', 'ok', 'inside')
     return points, edges.ProfileFit(*(getattr(fit, k)[keep] for k in fields)), blur, c, fraction
+
+
+def round_arc(img, camera, radius, c):
+    """
+    Return how much of the outline of sphere c (m) shows an edge on one sphere's outline, px.
+
+    One profile pass along c's outline (blur estimated) finds an edge on each profile; a sphere is
+    fitted to them (conic.fit_sphere, started from c), and the profiles whose edge lies within
+    3 sigma_e + ROUND_FLOOR_PX of its outline give the arc, their share of its circumference. A
+    ball's outline is an ellipse wherever it shows an edge; a circle inscribed in a
+    checkerboard's square meets the square's sides only near where it touches them (within
+    0.35 px over about a third of the circle at 20 px radius), however strong and sharp they are.
+    An arc, not a fraction: the evidence grows with the profiles, and a small blurred square is
+    round over more of its outline than a big one.
+    """
+    try:
+        pts, normals, kappa = ellipse_points(camera, c, radius)
+    except DetectionError:
+        return 0.0
+    fit, _ = edges.profile_edges(img, pts, normals, kappa, _window(camera, c, radius, BLUR_GUESS),
+                                 BLUR_GUESS, camera.distort_pixels, refit_blur=True)
+    if fit.ok.sum() < MIN_EDGE_POINTS:
+        return 0.0
+    xy = camera.to_normalized(pts[fit.ok] + fit.e[fit.ok, None] * normals[fit.ok])
+    try:
+        sphere = conic.fit_sphere(xy, radius, camera.fx, 1.0 / np.maximum(fit.sigma_e[fit.ok],
+                                                                          0.02) ** 2, c)
+    except conic.ConicError:
+        return 0.0
+    on = np.abs(sphere.residuals_px) < 3 * fit.sigma_e[fit.ok] + ROUND_FLOOR_PX
+    return float(2 * np.pi * camera.apparent_radius(c, radius) * on.sum() / len(pts))
 
 
 def _profiles(img, camera, c, radius, blur, refit_blur):

@@ -102,3 +102,27 @@ def test_a_candidate_within_a_bigger_ones_disc_is_left_out():
     assert detector._inside(spot, ball) and not detector._inside(ball, spot)
     assert not detector._inside(beside, ball)
     assert not detector._inside(search.Candidate(np.array([100.0, 100.0]), 30.0, 1.0), ball)
+
+
+def test_a_square_meets_its_inscribed_circle_on_a_short_arc_and_a_ball_all_round():
+    """
+    round_arc: how much of a sphere's outline shows an edge on one ellipse.
+
+    The sides of a 40 px square lie within a pixel of its inscribed circle (radius 20 px) where
+    1 / cos(phi) - 1 < 1 / 20 about the four points they touch it: 8 acos(20 / 21) of its 2 pi
+    (40 %), whatever the tolerance under a pixel. The ball shows its edge all round on a flat
+    background (each profile within 3 of its standard errors: all but a few in a thousand), and
+    over the checkerboard longer than any square's.
+    """
+    rng = np.random.default_rng(4)
+    board = simple_render.checkerboard(CAM, 40)
+    flat = simple_render.on_background(CAM, C, R, np.full(board.shape, 60.0), rng)
+    ball = simple_render.on_background(CAM, C, R, board, rng)
+    pattern = np.clip(np.rint(board + 2.0 * rng.standard_normal(board.shape)), 0, 255)
+    ray = np.linalg.solve(CAM.K, [419.5, 219.5, 1.0])           # a square's centre
+    square = CAM.fx * R / 20.0 * ray / np.linalg.norm(ray)
+    circumference = 2 * np.pi * CAM.apparent_radius(C, R)
+    assert detector.round_arc(flat.astype(np.float32), CAM, R, C) > 0.95 * circumference
+    inscribed = detector.round_arc(pattern.astype(np.float32), CAM, R, square)
+    assert inscribed < 8 * np.arccos(20 / 21) * 20.0
+    assert detector.round_arc(ball.astype(np.float32), CAM, R, C) > 2 * inscribed
