@@ -131,13 +131,14 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=
     views = [_model_view(img, camera, radius, d, c, gamma) for d, _, c in found]
     ranked = sorted(zip(found, views), key=lambda f: -f[0][1] * _clarity(f[1]))
     (top, first), rest = ranked[0], ranked[1:]
-    share = _round_share(camera, radius, top)
-    second = next((v for f, v in rest if _clarity(v) >= SECOND_BALL and _alike(first, v)
-                   and _round_share(camera, radius, f) >= SECOND_ROUND * share), None)
-    if _clarity(first) >= SECOND_BALL and second is not None:
-        a, b = (camera.project(v.position) for v in (first, second))
-        raise DetectionError(f'two balls in view, at pixels ({a[0]:.0f}, {a[1]:.0f}) and '
-                             f'({b[0]:.0f}, {b[1]:.0f}): ambiguous, not measured')
+    if _clarity(first) >= SECOND_BALL:
+        share = _round_share(camera, radius, top)
+        second = next((v for f, v in rest if _clarity(v) >= SECOND_BALL and _alike(first, v)
+                       and _round_share(camera, radius, f) >= SECOND_ROUND * share), None)
+        if second is not None:
+            a, b = (camera.project(v.position) for v in (first, second))
+            raise DetectionError(f'two balls in view, at pixels ({a[0]:.0f}, {a[1]:.0f}) and '
+                                 f'({b[0]:.0f}, {b[1]:.0f}): ambiguous, not measured')
     return top[0]
 
 

@@ -9,7 +9,8 @@ covariance predicts (chi-square) and the mean is within that resolution plus 3 s
 import numpy as np
 import pytest
 from robotenis_vision import camera as camera_model_vision
-from robotenis_vision import detector
+from robotenis_vision import detector, search
+from robotenis_vision.detection import Detection
 from robotenis_vision.detector import DetectionError
 from scipy.stats import chi2
 import simple_render
@@ -322,3 +323,29 @@ def test_a_ball_with_its_edge_on_less_of_its_outline_is_followed_from_the_frame_
     det = detector.detect(shadowed(moved, rng), CAM, R, 'conic', first, search=False)
     e = det.position - moved
     assert e @ np.linalg.solve(det.covariance, e) < chi2.ppf(0.999, 3)
+
+
+def test_two_balls_found_when_the_model_fit_cannot_view_the_first_return_the_first(monkeypatch):
+    """
+    By the conic method, two balls found, the model fit failing on the first: no ambiguity check.
+
+    The check needs the model fit's view of the first (its clarity); without one, the ball
+    ranked first is returned as the conic measured it, however clear the second is to the model
+    fit (here one with no round arc: both rank at 0, in the search's order).
+    """
+    near, far = np.array([0.05, -0.02, 0.35]), np.array([-0.08, 0.03, 0.4])
+    spheres = [search.Sphere(c, 0.9, np.zeros((0, 2)), search.Candidate(CAM.project(c), 20.0,
+                                                                        1.0), arc)
+               for c, arc in ((near, 100.0), (far, 0.0))]
+    monkeypatch.setattr(detector, 'find', lambda img, camera, radius: spheres)
+
+    def measure(img, camera, radius, method, c0, blur, gamma=1.0):
+        if method == 'model' and c0 is near:
+            raise DetectionError('the ball model misfits the image')
+        clear = {'coverage': 2 * np.pi, 'kept': 1.0, 'step': 50.0, 'psf_sigma': 1.0}
+        return Detection(np.asarray(c0), 1e-8 * np.eye(3), np.zeros((0, 2)), 0.1, method, clear)
+
+    monkeypatch.setattr(detector, 'measure', measure)
+    image = np.zeros((CAM.height, CAM.width), np.uint8)
+    det = detector.detect(image, CAM, R, 'conic')
+    np.testing.assert_array_equal(det.position, near)
