@@ -18,7 +18,9 @@ outlines and radial-symmetry votes give candidates, the steep points of rays fro
 on one sphere of the known radius (RANSAC); the spheres whose outline shows the longest arc of
 edge on one ellipse (round_arc: a checkerboard's square meets its inscribed circle only near
 four points) are measured; each must show its edge around MIN_ARC of its outline; a sphere seen
-on a bigger ball's disc is a mark on it (_on_ball), not a ball. Two balls measured in the image,
+on a bigger ball's disc is a mark on it (_on_ball), not a ball. The balls measured are ranked by
+the round arc of their measured outline (a search's sphere a few pixels off shows none) times
+the model fit's clarity. Two balls measured in the image,
 each clear to the model fit (its edge around the outline, its pixels kept: SECOND_BALL), alike
 (contrast and blur: _alike) and round alike (SECOND_ROUND), make it ambiguous: it is refused
 (DetectionError), by every method. With a prior (the
@@ -121,7 +123,7 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=
             continue
         found = [f for f in found if not _on_ball(camera, f[0].position, det.position, radius)]
         if not any(_same_ball(camera, det.position, d.position, radius) for d, _, _ in found):
-            found.append((det, sphere.round_arc, sphere.c))
+            found.append((det, round_arc(img, camera, radius, det.position), sphere.c))
     if not found:
         if failures:
             raise DetectionError(failures[0])
@@ -209,9 +211,9 @@ def _clarity(view):
 
 
 def _round_share(camera, radius, found):
-    """Return the share of a found ball's outline on one ellipse: (det, round_arc, c) -> 0 to 1."""
-    _, arc, c = found
-    return arc / (2 * np.pi * camera.apparent_radius(c, radius))
+    """Return the share of a measured ball's outline on one ellipse (det, round_arc, c): 0 to 1."""
+    det, arc, _ = found
+    return arc / (2 * np.pi * camera.apparent_radius(det.position, radius))
 
 
 def _alike(a, b):
@@ -275,7 +277,7 @@ def find(img, camera, radius):
             continue
         spheres.append(sphere)
     spheres = [replace(s, round_arc=round_arc(img, camera, radius, s.c)) for s in spheres]
-    spheres.sort(key=lambda s: -s.round_arc)
+    spheres.sort(key=lambda s: (-s.round_arc, -s.score))
     return spheres[:MEASURED]
 
 

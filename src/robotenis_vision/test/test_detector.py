@@ -331,12 +331,12 @@ def test_two_balls_found_when_the_model_fit_cannot_view_the_first_return_the_fir
 
     The check needs the model fit's view of the first (its clarity); without one, the ball
     ranked first is returned as the conic measured it, however clear the second is to the model
-    fit (here one with no round arc: both rank at 0, in the search's order).
+    fit (on this empty image neither shows a round arc: both rank at 0, in the search's order).
     """
     near, far = np.array([0.05, -0.02, 0.35]), np.array([-0.08, 0.03, 0.4])
     spheres = [search.Sphere(c, 0.9, np.zeros((0, 2)), search.Candidate(CAM.project(c), 20.0,
                                                                         1.0), arc)
-               for c, arc in ((near, 100.0), (far, 0.0))]
+               for c, arc in ((near, 100.0), (far, 60.0))]
     monkeypatch.setattr(detector, 'find', lambda img, camera, radius: spheres)
 
     def measure(img, camera, radius, method, c0, blur, gamma=1.0):
