@@ -20,12 +20,11 @@ edge on one ellipse (round_arc: a checkerboard's square meets its inscribed circ
 four points) are measured; each must show its edge around MIN_ARC of its outline; a sphere seen
 on a bigger ball's disc is a mark on it (_on_ball), not a ball. The balls measured are ranked by
 the round arc of their measured outline (a search's sphere a few pixels off shows none) times
-the model fit's clarity. Two balls measured in the image,
-each clear to the model fit (its edge around the outline, its pixels kept: SECOND_BALL), alike
-(contrast and blur: _alike) and round alike (SECOND_ROUND), make it ambiguous: it is refused
-(DetectionError), by every method. With a prior (the
-previous frame's Detection), the outline is measured where it was, and the search runs only if
-it is not found there.
+the model fit's clarity. Two balls measured in the image, each clear to the model fit (its edge
+around the outline, its pixels kept: SECOND_BALL), alike (contrast and blur: _alike) and round
+alike (SECOND_ROUND), make it ambiguous: it is refused (DetectionError), by every method. With a
+prior (the previous frame's Detection), the outline is measured where it was, and the search
+runs only if it is not found there.
 
 The outline is measured in ideal (undistorted) pixels, K [x, y, 1] for the ray (x, y, 1): there the
 sphere's outline is exactly an ellipse. Frames that cannot be trusted raise DetectionError with
@@ -445,7 +444,7 @@ def round_arc(img, camera, radius, c):
     3 sigma_e + ROUND_FLOOR_PX of its outline give the arc, their share of its circumference. A
     ball's outline is an ellipse wherever it shows an edge; a circle inscribed in a
     checkerboard's square meets the square's sides only near where it touches them (within
-    0.35 px over about a third of the circle at 20 px radius), however strong and sharp they are.
+    0.35 px over a quarter of the circle at 20 px radius), however strong and sharp they are.
     An arc, not a fraction: the evidence grows with the profiles, and a small blurred square is
     round over more of its outline than a big one.
     """
