@@ -39,7 +39,7 @@ from robotenis_vision import baseline, conic, edges, model_fit, paper_method, se
 from robotenis_vision.detection import Detection, DetectionError, RANGE
 
 METHODS = ('model', 'conic', 'paper', 'tangent', 'baseline')
-MIN_SCORE = 0.4                # of the rays from a candidate must agree on its sphere
+MIN_SCORE = 0.5                # of the rays from a candidate must agree on its sphere
 MEASURED = 3                   # confirmed spheres measured, best first
 MAX_RMS = 2.5                  # model fit: residual RMS over the noise beyond which it misfits
 MIN_KEPT = 0.6                 # model fit: of the pixels its robust weights must keep
