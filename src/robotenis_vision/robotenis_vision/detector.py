@@ -122,17 +122,18 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=
         except DetectionError as e:
             failures.append(str(e))
             continue
-        if any(_on_ball(camera, det.position, d.position, radius) for d, _, _ in found):
+        if any(_on_ball(camera, det.position, d.position, radius) for d, _ in found):
             continue
         found = [f for f in found if not _on_ball(camera, f[0].position, det.position, radius)]
-        if not any(_same_ball(camera, det.position, d.position, radius) for d, _, _ in found):
-            found.append((det, round_arc(img, camera, radius, det.position), sphere.c))
+        if not any(_same_ball(camera, det.position, d.position, radius) for d, _ in found):
+            found.append((det, sphere.c))
     if not found:
         if failures:
             raise DetectionError(failures[0])
         raise DetectionError('no sphere: no round outline of a plausible size in the image')
     if len(found) == 1:
         return found[0][0]
+    found = [(d, round_arc(img, camera, radius, d.position), c) for d, c in found]
     views = [_model_view(img, camera, radius, d, c, gamma) for d, _, c in found]
     ranked = sorted(zip(found, views), key=lambda f: -f[0][1] * _clarity(f[1]))
     (top, first), rest = ranked[0], ranked[1:]
@@ -279,8 +280,10 @@ def find(img, camera, radius):
                 spheres[same[0]] = sphere
             continue
         spheres.append(sphere)
-    spheres = [replace(s, round_arc=round_arc(img, camera, radius, s.c)) for s in spheres]
-    spheres.sort(key=lambda s: (-s.round_arc, -s.score))
+    if len(spheres) > 1:
+        arcs = [round_arc(img, camera, radius, s.c) for s in spheres]
+        order = sorted(range(len(spheres)), key=lambda k: (-arcs[k], -spheres[k].score))
+        spheres = [spheres[k] for k in order]
     return spheres[:MEASURED]
 
 

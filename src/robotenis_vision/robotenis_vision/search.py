@@ -243,7 +243,6 @@ class Sphere:
     score: float               # fraction of the rays with an outline point on its outline
     points: np.ndarray         # (k, 2) those points, ideal pixels
     candidate: Candidate
-    round_arc: float = 0.0     # px of its outline on one ellipse (detector.round_arc)
 
 
 RAY_SPACING_PX = 3.0

@@ -335,8 +335,8 @@ def test_two_balls_found_when_the_model_fit_cannot_view_the_first_return_the_fir
     """
     near, far = np.array([0.05, -0.02, 0.35]), np.array([-0.08, 0.03, 0.4])
     spheres = [search.Sphere(c, 0.9, np.zeros((0, 2)), search.Candidate(CAM.project(c), 20.0,
-                                                                        1.0), arc)
-               for c, arc in ((near, 100.0), (far, 60.0))]
+                                                                        1.0))
+               for c in (near, far)]
     monkeypatch.setattr(detector, 'find', lambda img, camera, radius: spheres)
 
     def measure(img, camera, radius, method, c0, blur, gamma=1.0):
