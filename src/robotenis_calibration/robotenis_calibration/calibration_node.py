@@ -3,8 +3,9 @@ The `calibration` node: the Calibrate service that runs a session and calibrates
 
 A request plans the poses (robotenis_calibration.poses) around the parameter ``sphere_guess`` (the
 user's rough ball position: required, it is the robot's), then the session runner commands each
-one on goal, waits for rest and settling, and counts detections (with ``replan``, the default, the
-poses after the first six rests are planned again around the ball those rests saw), while every
+one on goal, waits for rest and settling, and counts detections (the first pose the one whose ball
+should be nearest the optical axis; with ``replan``, the default, the poses after the first rest
+are planned again around the ball it saw, and again after six), while every
 message of the session is recorded to a rosbag2 bag (MCAP, robotenis_calibration.bag_io): the
 declared description, joint states, sphere positions and detections, camera info, goals, rest
 markers, progress, and of the camera images only the first ``images_per_pose`` frames of each rest,
@@ -74,7 +75,7 @@ PARAMETERS = {
     'description_path': (description.config_path('nominal.yaml'),
                          'the robot description the session starts from'),
     'sphere_guess': (UNSET, "m, base frame: the ball's rough position (a few cm); required"),
-    'replan': (True, 'plan the poses again around the ball the first six rests saw'),
+    'replan': (True, 'plan the poses again around the ball the first rest saw, and the first six'),
     'max_range': (poses.IMAGE_MAX_RANGE, 'm: the farthest the ball is planned from the camera (a '
                                          "rest's depth error grows as its square: see poses)"),
     'bags_dir': ('bags', 'folder of the recorded sessions'),
@@ -303,8 +304,8 @@ class CalibrationNode(Node):
             raise ValueError(f'request refused, nothing was moved: {refused}')
         rng = np.random.default_rng(request.seed)
         max_range = self.get_parameter('max_range').value
-        planned = poses.select(request.pose_selection or 'boundary', declared, guess, n, rng,
-                               max_range)
+        planned = poses.central_first(declared, guess, poses.select(
+            request.pose_selection or 'boundary', declared, guess, n, rng, max_range))
         stamp = time.strftime('%Y%m%d-%H%M%S')
         bag = request.bag_path or os.path.join(self.get_parameter('bags_dir').value,
                                                f'session-{stamp}')

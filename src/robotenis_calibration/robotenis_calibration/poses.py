@@ -4,8 +4,12 @@ Choosing calibration poses the hand camera can measure.
 The planner knows only what a real system knows: the declared description and a rough guess of
 where the ball is (base frame, a few cm). It predicts the ball in the camera with the declared
 camera rotation and no camera offset, so it keeps wide margins; rests that still miss the ball are
-skipped. Once a few rests are measured, ``refined_guess`` puts the ball where they saw it, and the
-session plans the rest of its poses with that (SessionRunner's ``replan``).
+skipped. ``central_first`` visits first the pose whose ball should be nearest the optical axis,
+the one that a wrong guess moves least out of view: the guess and the camera offset it ignores are
+mostly a depth error (in the demo's live session, 145 mm), which shifts a ball in the image in
+proportion to how far off axis it is. Once a rest is measured, ``refined_guess`` puts the ball
+where it was seen, and the session plans the rest of its poses with that, and again after a few
+more rests (SessionRunner's ``replan``).
 
 * ``boundary``: the paper's way -- random poses 5-10 cm from a singularity (section 5.1).
 * ``optimal``: a D-optimal design: from visible candidates, greedily add the pose that most
@@ -38,6 +42,19 @@ SELECTIONS = ('boundary', 'optimal')
 def predicted_sphere(declared, sphere_guess, P):
     """Where the ball should appear in the optical frame (K, 3) for effector positions P."""
     return (np.asarray(sphere_guess, dtype=float) - P) @ declared.camera_rotation
+
+
+def off_axis(declared, sphere_guess, P):
+    """How far off the optical axis the ball should appear (K,), in units of the planned field."""
+    x, y, z = predicted_sphere(declared, sphere_guess, P).T
+    return np.maximum(np.abs(x) / PLAN_HALF_FIELD[0], np.abs(y) / PLAN_HALF_FIELD[1]) / z
+
+
+def central_first(declared, sphere_guess, P):
+    """Return the poses P (K, 3) with the one of least ``off_axis`` moved to the front."""
+    P = np.asarray(P, dtype=float)
+    k = int(np.argmin(off_axis(declared, sphere_guess, P)))
+    return np.concatenate([P[k:k + 1], P[:k], P[k + 1:]])
 
 
 def refined_guess(declared, Theta, sphere):

@@ -4,9 +4,9 @@ The calibration session as a state machine, fed with time and measurements, free
 For each planned pose, in order: command it, wait until the joints are still, wait the settle time
 (vibrations of the robot and the ball's holder), then average resolver readings and sphere
 detections until enough frames are in; a pose whose ball is not seen within a time-out, or whose
-detections stop (a ball at the edge of the view), is skipped with the reason. After
-``replan_after`` measured rests the poses still to come may be replaced (``replan``: the ball is
-then known from those rests, not from the user's rough guess). An input
+detections stop (a ball at the edge of the view), is skipped with the reason. When
+the measured rests reach each count of ``replan_after`` the poses still to come may be replaced
+(``replan``: the ball is then known from those rests, not from the user's rough guess). An input
 silent for longer than a pose can last (robotenis_calibration.session_limits) stops the session:
 ``failure`` then says which, and the session is done without its remaining poses. The
 calibration node feeds it messages and executes the actions it returns.
@@ -112,13 +112,16 @@ class RunnerConfig:
 class SessionRunner:
     """Drives one session; ``actions`` lists what the node must do, ``rests`` what was measured."""
 
-    def __init__(self, poses, config=RunnerConfig(), replan=None, replan_after=6, clock=None):
+    def __init__(self, poses, config=RunnerConfig(), replan=None, replan_after=(1, 6),
+                 clock=None):
         """
         Prepare a session over ``poses``, visited in order.
 
         replan(rests, n): n poses (n, 3) to visit instead of the n still planned, or None to keep
-        them; called once, when ``replan_after`` rests are measured. clock(): wall seconds
-        (monotonic), or None to wait on the robot's times alone (see the module).
+        them; called when the measured rests reach each count in ``replan_after`` (the first
+        rest tells where the ball is to the declared model's error, a few more guard against
+        one wrong detection). clock(): wall seconds (monotonic), or None to wait on the robot's
+        times alone (see the module).
         """
         self.poses = np.asarray(poses, dtype=float)
         self.config = config
@@ -331,7 +334,7 @@ class SessionRunner:
         self.rests.append(self._rest)
         self.actions.append(('rest_end', self.index))
         remaining = len(self.poses) - self.index - 1
-        if self.replan is not None and len(self.rests) == self.replan_after and remaining > 0:
+        if self.replan is not None and len(self.rests) in self.replan_after and remaining > 0:
             poses = self.replan(self.rests, remaining)
             if poses is not None:
                 self.poses = np.concatenate([self.poses[:self.index + 1],

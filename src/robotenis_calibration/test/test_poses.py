@@ -37,3 +37,25 @@ def test_poses_keep_the_ball_within_max_range():
         assert np.all((z >= poses.PLAN_RANGE[0]) & (z <= 0.35))
     with pytest.raises(ValueError, match='max_range'):
         poses.boundary(declared, guess, 10, np.random.default_rng(4), max_range=0.15)
+
+
+def test_the_central_pose_comes_first_and_sees_the_ball_through_a_wrong_depth():
+    """
+    A ball 13 cm nearer than planned and 5 cm across.
+
+    The guess is 4 cm off, and the camera's offset that the planner ignores adds the simulator's
+    10 cm along the optical axis.
+
+    Many of the planned poses then show the ball cut by the border of the 640x480 view (f = 500
+    px: tan 0.64 and 0.48 across); the first one, the least off axis, does not.
+    """
+    truth, declared = sim_truth.load(), description.nominal()
+    S = truth.sphere_position - truth.camera_translation
+    error = np.array([0.03, -0.02, 0.02]) + truth.camera_translation
+    P = poses.boundary(declared, S + error, 90, np.random.default_rng(5), max_range=0.4)
+    first = poses.central_first(declared, S + error, P)
+    assert sorted(map(tuple, first)) == sorted(map(tuple, P))
+    x, y, z = poses.predicted_sphere(declared, S, first).T
+    R = declared.sphere_radius
+    seen = (z > 0) & (np.abs(x) + R < 0.64 * z) & (np.abs(y) + R < 0.48 * z)
+    assert seen[0] and seen.mean() < 0.8

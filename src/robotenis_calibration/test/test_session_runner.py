@@ -137,7 +137,7 @@ def test_a_ball_out_of_view_costs_only_the_no_ball_time():
 
 def test_the_poses_after_the_first_rests_are_planned_again():
     """
-    ``replan`` is asked once, after replan_after measured rests, for the poses still to come.
+    ``replan`` is asked when the measured rests reach each of replan_after, for the poses to come.
 
     The goals commanded from then on are its poses, and the session keeps its length.
     """
@@ -146,22 +146,23 @@ def test_the_poses_after_the_first_rests_are_planned_again():
 
     def replan(rests, n):
         asked.append(([r.index for r in rests], n))
-        return np.full((n, 3), 7.0)
+        return np.full((n, 3), 7.0 + len(rests))
 
     runner = SessionRunner(poses, RunnerConfig(frames_per_pose=5, settle_time=0.1), replan,
-                           replan_after=2)
-    actions = drive(runner, lambda k: True)
-    assert asked == [([0, 1], 3)]
+                           replan_after=(1, 3))
+    actions = drive(runner, lambda k: k != 1)
+    assert asked == [([0], 4), ([0, 2, 3], 1)]
     goals = [a[1] for _, a in actions if a[0] == 'goal']
-    np.testing.assert_array_equal(goals[:2], poses[:2])
-    np.testing.assert_array_equal(goals[2:], np.full((3, 3), 7.0))
-    assert len(runner.rests) == 5
+    np.testing.assert_array_equal(goals[:1], poses[:1])
+    np.testing.assert_array_equal(goals[1:4], np.full((3, 3), 8.0))
+    np.testing.assert_array_equal(goals[4:], np.full((1, 3), 10.0))
+    assert [r.index for r in runner.rests] == [0, 2, 3, 4]
 
 
 def test_a_replan_that_keeps_the_plan():
     poses = np.array([[0.1 * k, 0, 1.0] for k in range(1, 4)])
     runner = SessionRunner(poses, RunnerConfig(frames_per_pose=5, settle_time=0.1),
-                           lambda rests, n: None, 1)
+                           lambda rests, n: None, (1,))
     actions = drive(runner, lambda k: True)
     np.testing.assert_array_equal([a[1] for _, a in actions if a[0] == 'goal'], poses)
 
