@@ -197,7 +197,9 @@ def annulus(img, camera, c, R, outer, inner):
     rho = np.sqrt(np.einsum('ni,ij,nj->n', d, M, d))
     # distance from the outline along the ray from the centre, with slack for the normal's slant
     slack = 1 + 0.1 * (axes.max() / axes.min() - 1)
-    dist = (1 - rho) * np.linalg.norm(d, axis=1) / np.maximum(rho, 1e-9)
+    # (a pixel on the ellipse's very centre, rho = 0, is as deep inside as any)
+    dist = np.where(rho > 0, (1 - rho) * np.linalg.norm(d, axis=1) / np.maximum(rho, 1e-300),
+                    np.inf)
     keep = (dist < inner * slack + 0.5) & (dist > -outer * slack - 0.5)
     width = hi[0] - lo[0] + 1
     index = np.flatnonzero(keep)

@@ -74,3 +74,15 @@ def test_a_fit_that_wanders_over_a_flat_patch_shows_no_edge():
     step = np.abs(fit.levels[:, 2] - fit.levels[:, 0])
     assert np.mean(step > np.maximum(8.0, 4 * noise_only)) > 0.5     # what the noise alone allows
     assert fit.coverage() == 0.0
+
+
+def test_a_ball_whose_outline_is_centred_on_a_pixel_is_fitted():
+    """A pixel at the outline's very centre (on the axis of a camera with cx, cy whole) is deep."""
+    cam = camera.Camera(np.array([[F, 0.0, 320.0], [0.0, F, 240.0], [0.0, 0.0, 1.0]]),
+                        np.zeros(5), 640, 480)
+    c = np.array([0.0, 0.0, 0.2])
+    r_px = cam.apparent_radius(c, R)
+    v, u = np.mgrid[0:480, 0:640]
+    image = np.where(np.hypot(u - 320.0, v - 240.0) < r_px, 200.0, 60.0)
+    fit = model_fit.fit(image, cam, R, c * 1.003)
+    assert np.all(np.isfinite(fit.c)) and abs(fit.c[2] - c[2]) < 0.002
