@@ -47,9 +47,10 @@ def test_the_limb_is_shaded_by_the_pixels_area():
     Check that the pixels just inside the limb carry their area's mean shading, not their centre's.
 
     A frontally lit ball brightens as the square root of the depth inside its outline, so a pixel's
-    centre value exceeds its mean by about f'' / 12 (0.3 grey levels 1.5 px in). The reference
-    is the mean over 16 x 16 rays of each pixel; the renderer's 4 x 4 grid is 16 times closer
-    to it than the centre, and 8-bit rounding adds sd 0.29 / sqrt(n) to a mean over n pixels.
+    centre value exceeds its mean (f'' / 24 across the outline: 0.4 grey levels 1.5 px in). The
+    reference is the mean over 16 x 16 rays of each pixel; the renderer's 4 x 4 grid is 16 times
+    closer to it than the centre, and 8-bit rounding adds sd 0.29 / sqrt(n) to a mean over n
+    pixels.
     """
     C = np.array([0.0, 0.0, 0.2])
     D = 250.0
