@@ -357,7 +357,6 @@ def _coverage_and_shade(camera, C, R, lighting, box):
     cover[edge] = np.mean(inside, axis=1)
     shade = np.zeros(cover.shape, np.float32)
     lit = (cover > 0) & ~edge
-    shade[lit] = _shade(x[lit], y[lit], C, R, lighting)
     # A pixel integrates the light over its area: near the limb the shading bends as a square
     # root, and its value at the centre is brighter than the pixel's mean (0.4 grey levels 1.5 px
     # inside a frontally lit ball, falling as depth^-1.5: 0.10 at 4 px), which moved the
@@ -365,6 +364,8 @@ def _coverage_and_shade(camera, C, R, lighting, box):
     band = lit & (dist > -LIMB_BAND_PX)
     bx, by = _rays(x, y, dxy_du, dxy_dv, band, _SHADE_OFFSETS)
     shade[band] = np.mean(_shade(bx, by, C, R, lighting), axis=1)
+    deep = lit & ~band
+    shade[deep] = _shade(x[deep], y[deep], C, R, lighting)
     # The shading of a pixel on the outline is the mean over its covered part (the limb brightens
     # as a square root inward, so the centre's value would not do).
     sx, sy = _rays(x, y, dxy_du, dxy_dv, edge, _SHADE_OFFSETS)
