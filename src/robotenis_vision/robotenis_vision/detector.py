@@ -35,7 +35,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from robotenis_vision import baseline, conic, edges, model_fit, paper_method, search
+from robotenis_vision import baseline, conic, edges, highlight, model_fit, paper_method, search
 from robotenis_vision.detection import Detection, DetectionError, RANGE
 
 METHODS = ('model', 'conic', 'paper', 'tangent', 'baseline')
@@ -324,6 +324,8 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
     place; and a fit whose outline then moved REFIT_PX or more is made again from where it ended
     (at most REFITS times): its annulus was cut around the start, and a search's sphere a few
     pixels off (a part of the outline, a checkerboard's square beside it) leaves the fit halfway.
+    A specular highlight found on the ball's disc (``highlight.fit``) is taken out of the pixels
+    and the fit made again from where it ended.
     A previous frame's ball is where it was: its fit is not made again (a wrong prior must fail,
     not wander to what lies beside it). From a previous frame's model fit, its ``noise_levels``
     settle the robust weights at once (model_fit.fit); its ``edge_fraction`` (extra
@@ -344,6 +346,10 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
                 break
             c0 = fit.c
             fit = model_fit.fit(img, camera, radius, c0, fit.blur, gamma)
+        lobe = highlight.fit(img, camera, fit.c, radius, fit.noise, fit.blur, gamma)
+        if lobe is not None:
+            fit = model_fit.fit(img, camera, radius, fit.c, fit.blur, gamma, highlight=lobe,
+                                noise_levels=noise_levels)
         covered = fit.coverage()
         flips = fit.polarity_flips()
         limb = fit.limb_variation()

@@ -34,7 +34,8 @@ moved the outline of a frontally lit 19 px ball over a darker background by a te
 at a blur of 1 px (0.46 % of the range, 0.12 % with it; noise-free renders). Known limits:
 where the terminator crosses the limb the shading is clamped (max(0, n.l)) and this model
 misreads it; a lens's defocus is a disc, not the Gaussian assumed (benchmarks/vision.py measures
-both).
+both). A specular highlight is no part of this model: one found on the ball's disc is measured
+there and its predicted tail taken out of the annulus's pixels before the fit (``highlight``).
 
 Geometry. The outline is the cone of rays touching the sphere, q(u) = (r.c)^2 - (c.c - R^2) r.r = 0
 for the ray r = K^-1 (u, 1) of an ideal (undistorted) pixel u (C1 of robotenis_vision.conic). A
@@ -148,6 +149,7 @@ class Annulus:
     along: np.ndarray        # (n,) position along its bin's arc, -1 to 1
     right: np.ndarray        # (n,) the pixel to the right, -1 if not in the annulus
     usable: np.ndarray       # (n,) not saturated
+    pixels: np.ndarray       # (n, 2) image pixels (u, v), integers
 
 
 def outline_offset(camera, R, a, b):
@@ -231,8 +233,9 @@ def annulus(img, camera, c, R, outer, inner):
                else stretch_map[lo[1]:hi[1] + 1, lo[0]:hi[0] + 1].reshape(-1, 2, 2)[index])
     usable = (vals > SATURATED[0]) & (vals < SATURATED[1])
     bin_angle = (present + 0.5) / n_bins * 2 * np.pi - np.pi
+    pixels = np.column_stack([uu + lo[0], vv + lo[1]])[order]
     return Annulus(vals, ideal[index], stretch, bins, gather, angle, bin_angle, along, right,
-                   usable)
+                   usable, pixels)
 
 
 @dataclass
@@ -471,7 +474,7 @@ def linearise(values, gamma):
 
 
 def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=True,
-        noise_levels=None):
+        noise_levels=None, highlight=None):
     """
     Fit the sphere of radius R to the image from a start c0 (m) whose outline is a pixel or so off.
 
@@ -483,6 +486,8 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
     ``noise_levels``: a previous fit's of the same scene (ModelFit.noise_levels, a frame before at
     rest): the robust scale and the zones' noise start there instead of being found in the first
     iterations, so that the weights are settled from the first step (half the iterations).
+    ``highlight``: the ball's specular lobe measured on its disc (``highlight.fit``), taken out
+    of the annulus's pixels before the fit.
     """
     c = np.asarray(c0, dtype=float).copy()
     s = float(np.clip(blur0, *BLUR_RANGE))
@@ -492,6 +497,8 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
     y, w0 = linearise(ann.values, gamma)
     w0 = w0 * ann.usable
     geo = geometry(ann, camera, c, R)
+    if highlight is not None:
+        y = y - highlight.values(camera, ann.pixels, c, R, s)
     X, H = columns(geo, ann, s)[:2]
     H = H if limb else H[:, :0]
     beta, levels = _solve(X, H, y, w0, ann)[:2]
