@@ -38,6 +38,7 @@ import numpy as np
 from robotenis_vision import baseline, conic, edges, highlight, model_fit, paper_method, search
 from robotenis_vision.detection import Detection, DetectionError, RANGE
 
+LOOK = 'look'                  # measure's lobe: look for a highlight on the ball's disc
 METHODS = ('model', 'conic', 'paper', 'tangent', 'baseline')
 MIN_SCORE = 0.5                # of the rays from a candidate must agree on its sphere
 MEASURED = 3                   # confirmed spheres measured, best first
@@ -106,7 +107,8 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=
         try:
             return measure(img, camera, radius, method, np.asarray(prior.position, dtype=float),
                            prior.extra.get('psf_sigma'), gamma,
-                           prior.extra.get('noise_levels'), prior.extra.get('edge_fraction'))
+                           prior.extra.get('noise_levels'), prior.extra.get('edge_fraction'),
+                           prior.extra.get('highlight', LOOK))
         except DetectionError:
             if not search:
                 raise
@@ -311,7 +313,7 @@ def _within(centre_a, ra, centre_b, rb):
 
 
 def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
-            edge_fraction=None):
+            edge_fraction=None, lobe=LOOK):
     """
     Measure the sphere whose outline lies near that of sphere c0 (m), by ``method``.
 
@@ -324,8 +326,9 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
     place; and a fit whose outline then moved REFIT_PX or more is made again from where it ended
     (at most REFITS times): its annulus was cut around the start, and a search's sphere a few
     pixels off (a part of the outline, a checkerboard's square beside it) leaves the fit halfway.
-    A specular highlight found on the ball's disc (``highlight.fit``) is taken out of the pixels
-    and the fit made again from where it ended.
+    A specular highlight found on the ball's disc around c0 (``highlight.fit``), or a previous
+    model fit's ``lobe`` of the same ball (its Highlight, or None for none), is taken out of the
+    pixels the fit uses; LOOK looks for one.
     A previous frame's ball is where it was: its fit is not made again (a wrong prior must fail,
     not wander to what lies beside it). From a previous frame's model fit, its ``noise_levels``
     settle the robust weights at once (model_fit.fit); its ``edge_fraction`` (extra
@@ -340,16 +343,19 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
         if from_search:
             first = model_fit.fit(img, camera, radius, c0, 1.5, gamma, iterations=4, limb=False)
             c0, blur = first.c, first.blur
-        fit = model_fit.fit(img, camera, radius, c0, blur, gamma, noise_levels=noise_levels)
+        elif lobe is LOOK:                  # at rest: c0 and its blur from the frame before
+            lobe = highlight.fit(img, camera, c0, radius, blur, gamma)
+        fit = model_fit.fit(img, camera, radius, c0, blur, gamma, noise_levels=noise_levels,
+                            highlight=None if lobe is LOOK else lobe)
         for _ in range(REFITS if from_search else 0):
             if max(model_fit.outline_offset(camera, radius, c0, fit.c)) < REFIT_PX:
                 break
             c0 = fit.c
             fit = model_fit.fit(img, camera, radius, c0, fit.blur, gamma)
-        lobe = highlight.fit(img, camera, fit.c, radius, fit.noise, fit.blur, gamma)
-        if lobe is not None:
-            fit = model_fit.fit(img, camera, radius, fit.c, fit.blur, gamma, highlight=lobe,
-                                noise_levels=noise_levels)
+        if lobe is LOOK:                    # from a search: where the fit ended, and again
+            lobe = highlight.fit(img, camera, fit.c, radius, fit.blur, gamma)
+            if lobe is not None:
+                fit = model_fit.fit(img, camera, radius, fit.c, fit.blur, gamma, highlight=lobe)
         covered = fit.coverage()
         flips = fit.polarity_flips()
         limb = fit.limb_variation()
@@ -371,7 +377,8 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
         return Detection(fit.c, fit.cov, edge, float('nan'), 'model',
                          {'psf_sigma': fit.blur, 'noise': fit.noise, 'coverage': covered,
                           'rms': fit.rms, 'kept': fit.kept, 'iterations': fit.iterations,
-                          'step': float(np.median(step)), 'noise_levels': fit.noise_levels})
+                          'step': float(np.median(step)), 'noise_levels': fit.noise_levels,
+                          'highlight': lobe})
     ideal, pf, sigma, c_out, fraction = outline(img, camera, radius, c0, blur, edge_fraction)
     xy = camera.to_normalized(ideal)
     weights = 1.0 / np.maximum(pf.sigma_e, 0.02) ** 2      # floored: no point outweighs the rest

@@ -37,8 +37,7 @@ def test_the_simulators_highlight_is_measured_where_it_is():
     for C in CENTRES:
         image = cm.render(cam, C, R, np.random.default_rng(1), lighting=lighting, noise_sigma=2.0)
         det = detector.detect(image, cam, R, 'model')
-        lobe = highlight.fit(image, cam, det.position, R, det.extra['noise'],
-                             det.extra['psf_sigma'])
+        lobe = highlight.fit(image, cam, det.position, R, det.extra['psf_sigma'])
         assert lobe is not None
         width = 1 / np.sqrt(lighting.shininess)
         assert np.arccos(lobe.light @ true_light) < width / 10
@@ -51,8 +50,7 @@ def test_no_highlight_is_found_on_a_lambertian_ball():
     for C in CENTRES:
         image = cm.render(cam, C, R, np.random.default_rng(1), lighting=lighting, noise_sigma=2.0)
         det = detector.detect(image, cam, R, 'model')
-        assert highlight.fit(image, cam, det.position, R, det.extra['noise'],
-                             det.extra['psf_sigma']) is None
+        assert highlight.fit(image, cam, det.position, R, det.extra['psf_sigma']) is None
 
 
 def test_a_ball_with_a_highlight_is_measured_where_the_same_ball_without_one_is():
@@ -92,8 +90,8 @@ def test_on_mitsuba_the_highlight_is_found_on_glossy_balls_lit_from_the_front_on
             det = detector.detect(frames[0], cam, R, 'model', gamma=scene['exposure']['gamma'])
         except detector.DetectionError:
             continue
-        lobe = highlight.fit(frames[0], cam, det.position, R, det.extra['noise'],
-                             det.extra['psf_sigma'], scene['exposure']['gamma'])
+        lobe = highlight.fit(frames[0], cam, det.position, R, det.extra['psf_sigma'],
+                             scene['exposure']['gamma'])
         kind, light = scene['material']['type'], scene['light']
         found[kind] += lobe is not None
         if kind == 'glossy' and light['type'] == 'point' and light['direction'] == 'frontal':
