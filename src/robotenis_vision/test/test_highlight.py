@@ -53,6 +53,19 @@ def test_no_highlight_is_found_on_a_lambertian_ball():
         assert highlight.fit(image, cam, det.position, R, det.extra['psf_sigma']) is None
 
 
+def test_at_rest_the_lobe_is_looked_for_once_and_reused():
+    """A frame seeded by the previous model fit takes its lobe (or its finding of none) along."""
+    cam = camera.default()
+    for lighting in (cm.Lighting(), replace(cm.Lighting(), specular=0.0)):
+        frames = [cm.render(cam, CENTRES[0], R, np.random.default_rng(k), lighting=lighting)
+                  for k in range(2)]
+        first = detector.detect(frames[0], cam, R, 'model')
+        second = detector.detect(frames[1], cam, R, 'model', prior=first)
+        assert 'highlight' in first.extra
+        assert second.extra['highlight'] is first.extra['highlight']
+        assert (first.extra['highlight'] is None) == (lighting.specular == 0.0)
+
+
 def test_a_ball_with_a_highlight_is_measured_where_the_same_ball_without_one_is():
     """
     With its highlight taken out, the fit agrees with the fit of the ball rendered without one.
