@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import itertools
 
 import numpy as np
-from robotenis_vision.model_fit import (_ideal_maps, camera_key, linearise, SATURATED,
+from robotenis_vision.model_fit import (camera_key, ideal_maps, linearise, SATURATED,
                                         SCALE_FLOOR)
 from scipy.ndimage import binary_dilation, gaussian_filter
 from scipy.optimize import least_squares
@@ -77,7 +77,7 @@ class Highlight:
         ring[pixels[:, 1] - lo[1], pixels[:, 0] - lo[0]] = True
         ring = binary_dilation(ring, iterations=margin)
         vv, uu = np.nonzero(ring)
-        ideal_map, stretch_map = _ideal_maps(camera_key(camera))
+        ideal_map, stretch_map = ideal_maps(camera_key(camera))
         k = SUBSAMPLES
         offsets = np.stack(np.meshgrid((np.arange(k) + 0.5) / k - 0.5,
                                        (np.arange(k) + 0.5) / k - 0.5), -1).reshape(-1, 2)
@@ -146,7 +146,7 @@ def disc_pixels(img, camera, c, R, blur, gamma=1.0):
     centre = camera.project(c)
     lo = np.maximum(np.floor(centre - 1.2 * r_px).astype(int), 0)
     hi = np.minimum(np.ceil(centre + 1.2 * r_px).astype(int) + 1, [camera.width, camera.height])
-    ideal = _ideal_maps(camera_key(camera))[0][lo[1]:hi[1], lo[0]:hi[0]]
+    ideal = ideal_maps(camera_key(camera))[0][lo[1]:hi[1], lo[0]:hi[0]]
     values = np.asarray(img, dtype=float)[lo[1]:hi[1], lo[0]:hi[0]]
     n, v, cos_i = _normals(camera, ideal.reshape(-1, 2), c, R)
     keep = ((cos_i.reshape(values.shape) > np.cos(_rim_angle(camera, c, R, blur)))

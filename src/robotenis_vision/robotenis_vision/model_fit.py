@@ -114,7 +114,7 @@ def camera_key(camera):
 
 
 @functools.lru_cache(maxsize=4)
-def _ideal_maps(key):
+def ideal_maps(key):
     """
     Return each image pixel's ideal (undistorted) position and the undistortion's stretch.
 
@@ -186,7 +186,7 @@ def annulus(img, camera, c, R, outer, inner):
     centre, M = _ellipse(outline_conic(camera, c, R))
     values, V = np.linalg.eigh(M)
     axes = 1 / np.sqrt(values)
-    ideal_map, stretch_map = _ideal_maps(camera_key(camera))
+    ideal_map, stretch_map = ideal_maps(camera_key(camera))
     t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
     outline = centre + (np.stack([np.cos(t), np.sin(t)], 1) * axes) @ V.T
     image_outline = camera.distort_pixels(outline)
