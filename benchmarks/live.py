@@ -84,8 +84,7 @@ def links(robot, args):
     for far in (poses.PLAN_RANGE[1], poses.IMAGE_MAX_RANGE):
         for label, images in (('noise model only', None), ('images, no dynamics', 'model')):
             session, meas, d = study.static_run(robot, description.nominal(), args.poses,
-                                                args.seed, guess_error=seen, images=images,
-                                                max_range=far)
+                                                args.seed, args.selection, seen, images, far)
             out.append(scored(f'{label}, <= {far} m ({len(session)})', d, meas, session,
                               robot, session.direction)[0])
     return out
@@ -118,7 +117,7 @@ def live_session(effect, folder, args):
     t = time.perf_counter()
     status = demo.ros_session(description.nominal(), sim_truth.load(), SimpleNamespace(
         ros_poses=args.poses, frames=args.frames, settle=args.settle, seed=args.seed, out=out,
-        effect=effect))
+        effect=effect, selection=args.selection))
     wall = time.perf_counter() - t
     results = sorted(glob.glob(os.path.join(out, 'calibration-*.yaml')))
     if status != 0 or not results:
@@ -134,6 +133,8 @@ def main():
     parser.add_argument('--frames', type=int, default=demo.LIVE_FRAMES)
     parser.add_argument('--settle', type=float, default=demo.LIVE_SETTLE)
     parser.add_argument('--seed', type=int, default=1)
+    parser.add_argument('--selection', default='boundary', choices=poses.SELECTIONS,
+                        help="the sessions' pose selection (poses.select)")
     parser.add_argument('--images-only', action='store_true',
                         help='only the links apart, no session through ROS')
     args = parser.parse_args()
@@ -165,7 +166,8 @@ def main():
     print('\n'.join(apart))
     if args.images_only:
         return
-    print(f'\nlive sessions: {args.poses} poses, {args.frames} frames, settle {args.settle} s; '
+    print(f'\nlive sessions: {args.poses} {args.selection} poses, {args.frames} frames, '
+          f'settle {args.settle} s; '
           'held-out error against the truth (the target), and in brackets the FK error over 500 '
           'boundary poses')
     print(f'  {"hidden effect":20s} {"claimed":28s} {"live":>18s} {"static floor":>18s} '

@@ -9,7 +9,8 @@
         A result worse than the declared description on the held-out poses is refused unless
         --force; a failed or refused run never replaces an existing RESULT.yaml.
     ./robotenis calibrate --call [--poses N] [--frames N] [--settle S] [--seed N]
-                                 [--selection boundary|optimal] [--bag PATH] [--namespace NS]
+                                 [--selection boundary|optimal|discriminating] [--bag PATH]
+                                 [--namespace NS]
         calls the calibration service of a running system (0 or absent: the service's defaults)
 """
 import argparse
@@ -81,7 +82,8 @@ def main(argv=None):
                         help='call the calibrate service of a running system')
     parser.add_argument('--poses', type=int, default=0)
     parser.add_argument('--frames', type=int, default=0)
-    parser.add_argument('--selection', default='boundary', choices=('boundary', 'optimal'))
+    parser.add_argument('--selection', default='boundary',
+                        choices=('boundary', 'optimal', 'discriminating'))
     parser.add_argument('--bag', default='',
                         help='bag path for the recorded session (with --call)')
     parser.add_argument('--namespace', default='', help="the system's namespace (with --call)")
