@@ -41,6 +41,10 @@ from robotenis_vision.detection import Detection, DetectionError, RANGE
 LOOK = 'look'                  # measure's lobe: look for a highlight on the ball's disc
 METHODS = ('model', 'conic', 'paper', 'tangent', 'baseline')
 MIN_SCORE = 0.5                # of the rays from a candidate must agree on its sphere
+# of the rays a ball lit from the side still shows: its shadowed half can be as dark as the
+# background, which leaves the lit half's rays (0.47-0.49 on a bench scene where the marks on
+# that ball's terminator scored 0.52-0.63 and were measured as balls 0.4-1.0 m behind it)
+HALF_LIT_SCORE = 0.35
 MEASURED = 3                   # confirmed spheres measured, best first
 MAX_RMS = 2.5                  # model fit: residual RMS over the noise beyond which it misfits
 MIN_KEPT = 0.6                 # model fit: of the pixels its robust weights must keep
@@ -254,9 +258,12 @@ def find(img, camera, radius):
     a clean image gives fastest; then the open discs, the sharp outlines, the coarse votes; less
     any lying within the disc of a bigger one, as a highlight or a shading feature on the ball
     does, which measured as a ball reads it a few times too far) are confirmed by their rays:
-    distinct spheres with MIN_SCORE of their rays on the outline, within RANGE of the camera. The
-    MEASURED with the longest round_arc are returned, longest first: the rays' score counts any
-    steep point within a pixel, and a checkerboard's square scores as high as the ball.
+    distinct spheres with MIN_SCORE of their rays on the outline, within RANGE of the camera. A
+    sphere with only HALF_LIT_SCORE of them (a ball whose shadowed half is as dark as its
+    background) is kept in place of the spheres that are marks on its disc: the ball hides what
+    lies behind it. The MEASURED with the longest round_arc are returned, longest first: the
+    rays' score counts any steep point within a pixel, and a checkerboard's square scores as high
+    as the ball.
     """
     r_min, r_max = camera.fx * radius / RANGE[1], camera.fx * radius / RANGE[0]
     found = (search.open_discs(img, r_min, r_max) + search.sharp_candidates(img, r_min, r_max)
@@ -267,11 +274,14 @@ def find(img, camera, radius):
         candidates.insert(0, search.Candidate(centre, r, 1.0))
     except edges.EdgeError:
         pass
-    spheres = []
+    spheres, half_lit = [], []
     for cand in candidates:
         sphere = search.confirm(img, camera, radius, cand)
-        if (sphere is None or sphere.score < MIN_SCORE or not sphere.c[2] > radius
+        if (sphere is None or sphere.score < HALF_LIT_SCORE or not sphere.c[2] > radius
                 or not RANGE[0] <= np.linalg.norm(sphere.c) <= RANGE[1]):
+            continue
+        if sphere.score < MIN_SCORE:
+            half_lit.append(sphere)
             continue
         # a mark on a ball and the ball are kept apart: the model fit tells them (detect)
         same = [k for k, s in enumerate(spheres) if _same_ball(camera, s.c, sphere.c, radius)
@@ -282,11 +292,21 @@ def find(img, camera, radius):
                 spheres[same[0]] = sphere
             continue
         spheres.append(sphere)
+    spheres = _marks_replaced(camera, radius, spheres, half_lit)
     if len(spheres) > 1:
         arcs = [round_arc(img, camera, radius, s.c) for s in spheres]
         order = sorted(range(len(spheres)), key=lambda k: (-arcs[k], -spheres[k].score))
         spheres = [spheres[k] for k in order]
     return spheres[:MEASURED]
+
+
+def _marks_replaced(camera, R, spheres, half_lit):
+    """Return ``spheres`` with those that are marks on a half-lit ball replaced by that ball."""
+    for ball in sorted(half_lit, key=lambda s: -s.score):
+        marks = [s for s in spheres if _on_ball(camera, s.c, ball.c, R)]
+        if marks:
+            spheres = [s for s in spheres if not any(s is m for m in marks)] + [ball]
+    return spheres
 
 
 def _on_ball(camera, a, b, R):
