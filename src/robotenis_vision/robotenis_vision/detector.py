@@ -303,9 +303,9 @@ def find(img, camera, radius):
 def _marks_replaced(camera, R, spheres, half_lit):
     """Return ``spheres`` with those that are marks on a half-lit ball replaced by that ball."""
     for ball in sorted(half_lit, key=lambda s: -s.score):
-        marks = [s for s in spheres if _on_ball(camera, s.c, ball.c, R)]
-        if marks:
-            spheres = [s for s in spheres if not any(s is m for m in marks)] + [ball]
+        kept = [s for s in spheres if not _on_ball(camera, s.c, ball.c, R)]
+        if len(kept) < len(spheres):
+            spheres = kept + [ball]
     return spheres
 
 
