@@ -136,8 +136,8 @@ def discriminating(declared, sphere_guess, n, rng, pool_size=3000, seed_poses=20
     """
     pool = visible_candidates(declared, sphere_guess, pool_size, rng, max_range=max_range)
     model = synthetic.true_model(declared)
-    model = idf.Model(model.desc, model.P0, {name: np.zeros(3) for name in DISCRIMINATED
-                                             if effects.is_effect(name)})
+    for name in DISCRIMINATED:
+        model = diagnosis.with_candidate(model, name)
     names = idf.PAPER_PARAMETERS + tuple(
         p for name in DISCRIMINATED for p in diagnosis.candidate_parameters(name))
     rows = pose_rows(model, synthetic.measure(declared, pool), names)
