@@ -59,11 +59,12 @@ def runs():
         off = live.measure(OFF_S, 'tracker off')
         effector = np.array([P for ns, P in sorted(live.probe.effector.items())
                              if off.t0 <= ns * 1e-9 < off.t1])
-    return on, off, effector
+        frames = [t for t, _ in live.probe.balls]
+    return on, off, effector, frames
 
 
 def test_the_ball_stays_in_the_image_and_detected(runs):
-    on, _, _ = runs
+    on, _, _, _ = runs
     assert on.frames >= 0.9 * TRACKING_S * 120.0, \
         'frames missing: the camera did not render at 120 Hz'
     assert on.detected > 0.95, f'only {100 * on.detected:.1f} % of the frames detected'
@@ -71,7 +72,7 @@ def test_the_ball_stays_in_the_image_and_detected(runs):
 
 
 def test_the_feedforward_removes_most_of_the_lag(runs):
-    on, _, _ = runs
+    on, _, _, _ = runs
     lag = np.mean(on.ball_speed) / pbvs.K_P
     bias = np.linalg.norm(np.mean(on.detector, axis=0))
     setup = tsetup.Setup(sigma_camera=tuple(np.std(on.detector, axis=0)),
@@ -86,8 +87,10 @@ def test_the_feedforward_removes_most_of_the_lag(runs):
 
 
 def test_without_the_tracker_the_robot_stops_and_the_ball_gets_away(runs):
-    _, off, effector = runs
+    _, off, effector, frames = runs
     assert 1e3 * np.max(np.linalg.norm(effector - effector[0], axis=1)) < HOLD_MM
-    assert len(off.true), (f'none of the {off.frames} frames scored: the probe has '
-                           f'{len(effector)} truth samples in the window')
+    assert len(off.true), (
+        f'none of the {off.frames} frames in {off.t0:.3f}-{off.t1:.3f} s scored: the probe has '
+        f'{len(effector)} truth samples in it, and {len(frames)} frames in all '
+        f"(the last at {frames[-1] if frames else float('nan'):.3f} s)")
     assert np.mean(off.true) > np.mean(off.ball_speed) / pbvs.K_P

@@ -91,8 +91,8 @@ class HandCameraNode(Node):
         self.image_pub = self.create_publisher(Image, 'camera/image_raw', qos_profile_sensor_data)
         self.info_pub = self.create_publisher(CameraInfo, 'camera/camera_info',
                                               qos_profile_sensor_data)
-        # the truth is for scorers, which may be busy for a moment: keep 0.8 s of frames for them
-        self.ball_pub = self.create_publisher(PointStamped, 'sim/ball_position', 100)
+        # the truth is for scorers, which may be starved of CPU for a while: keep 8 s of frames
+        self.ball_pub = self.create_publisher(PointStamped, 'sim/ball_position', 1000)
         self.create_subscription(PointStamped, 'sim/effector_position', self.on_effector,
                                  max(1, int(p['effector_queue'])))
         self.frames = camera_model.FrameClock(rate) if p['tick_on_effector'] else None

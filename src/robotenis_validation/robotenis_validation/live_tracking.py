@@ -338,8 +338,13 @@ class LiveTracking:
             self.say(f'{label}: {shown - t0:.1f} / {duration:.1f} s simulated '
                      f'({time.perf_counter() - wall0:.0f} s wall, '
                      f'{100 * detected:.0f} % of frames detected)')
-        # the last frames' detections
-        self.spin_until(lambda: self.probe.now >= t1 + LATE_S, label)
+        # the last frames' detections, and the truth of every frame in the window: the probe takes
+        # its topics in turn, so on a busy machine one stream can lag the other by seconds
+        # (measured: frames 1.5 s behind the effector samples with the tracker off)
+        deadline = time.perf_counter() + WALL_TIMEOUT_S
+        self.spin_until(lambda: self.probe.now >= t1 + LATE_S and (
+            any(t >= t1 for t, _ in self.probe.balls[-1:]) or time.perf_counter() > deadline),
+            label)
         return self.probe.window(t0, t1)
 
 
