@@ -29,7 +29,9 @@ minor semi-axis) measured in the same run:
 4. the 3D error per metre of range, median and RMS, and the baseline's over the model's (>= 10x);
 5. the failure rate of frames with the whole ball in view (<= 1 %); a detection whose centre's ray
    misses the ball (a pattern's or a shadow's round outline measured instead) is a failure too,
-   counted apart ("wrong ball") and kept out of the other figures;
+   counted apart ("wrong ball") and kept out of the other figures; and images without a ball
+   (each textured background of the list, the project's renderer, the ball out of view): every
+   one must be refused ("no ball" in issue 13's bad input), a ball reported there is a false one;
 6. speed on one core, 640x480: a stream of frames (each seeded by the last; target < 2 ms) and a
    single image (< 5 ms), and the render time of the project's renderer (< 4 ms);
 7. at rest, as the sphere_detector node measures (robotenis_vision.rest.RestCorrection: the conic
@@ -69,6 +71,7 @@ TARGET_DEPTH_BIAS, TARGET_LATERAL_BIAS = 0.05, 0.01         # % of range
 TARGET_PRECISION, TARGET_RATIO, TARGET_FAILURES = 1.5, 10.0, 1.0
 TARGET_STREAM_MS, TARGET_SINGLE_MS, TARGET_RENDER_MS = 2.0, 5.0, 4.0
 # std, range (mm), 50 samples: the paper's Table 2
+OUT_OF_VIEW = np.array([3.0, 0.0, 0.5])   # m: a ball centre far outside the camera's view
 TABLE2 = {'X': (0.014, 0.059), 'Y': (0.038, 0.163), 'Z': (0.092, 0.497)}
 
 
@@ -270,6 +273,23 @@ def project_renderer(scenes):
         if (k + 1) % 20 == 0:
             print(f'   ... {k + 1} scenes ({time.time() - t0:.0f} s)', flush=True)
     return summarise('project renderer', tallies)
+
+
+def empty_images(scenes):
+    """Count, per method, the balls reported on the list's textured backgrounds without a ball."""
+    textured = [s for s in scenes if s['background']['type'] not in ('dark', 'grey')]
+    rng = np.random.default_rng(4)
+    false = {m: [] for m in METHODS}
+    for scene in textured:
+        _, kw = project_scene(scene)
+        image = cm.render(CAM, OUT_OF_VIEW, R, rng, **kw)
+        for m in METHODS:
+            if not isinstance(attempt(image, CAM, m, kw['gamma']), str):
+                false[m].append(f"{scene['id']} ({scene['background']['type']})")
+    print(f"   no ball in view, the project's renderer: {len(textured)} textured backgrounds of "
+          'the list (checkered, gradient, random texture), each must be refused; false balls: '
+          + ', '.join(f'{m} {len(v)}' for m, v in false.items()))
+    print(f"   model's false balls: {', '.join(false['model']) or 'none'}")
 
 
 def mitsuba_available():
@@ -523,6 +543,7 @@ def main():
         print('mitsuba is not installed (benchmarks/requirements.txt): the scene list needs it')
         return 1
     project = project_renderer(scenes)
+    empty_images(scenes)
     mitsuba_figures = mitsuba(scenes)
     print('targets (issue 13):')
     verdicts('project renderer', project)
