@@ -148,8 +148,7 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=
         raise DetectionError(f'no ball: the outline measured lies on one sphere over only '
                              f'{100 * max(shares):.0f} % of it (at least '
                              f'{100 * MIN_ROUND_SHARE:.0f} %): a pattern of the background')
-    found = [(d, 2 * np.pi * camera.apparent_radius(d.position, radius) * (s or 0.0), c)
-             for (d, c), s in zip(found, shares)]
+    found = [(d, _arc(camera, radius, d.position, s), c) for (d, c), s in zip(found, shares)]
     if len(found) == 1:
         return found[0][0]
     views = [_model_view(img, camera, radius, d, c, gamma) for d, _, c in found]
@@ -503,8 +502,12 @@ def round_arc(img, camera, radius, c):
     An arc, not a fraction: the evidence grows with the profiles, and a small blurred square is
     round over more of its outline than a big one. 0 when the profiles cannot tell (_round_on).
     """
-    on = _round_on(img, camera, radius, c)
-    return 0.0 if on is None else float(2 * np.pi * camera.apparent_radius(c, radius) * on)
+    return _arc(camera, radius, c, _round_on(img, camera, radius, c))
+
+
+def _arc(camera, radius, c, share):
+    """Return the arc (px) a ``share`` of sphere c's outline makes; 0 for None (untold)."""
+    return 0.0 if share is None else float(2 * np.pi * camera.apparent_radius(c, radius) * share)
 
 
 def _round_on(img, camera, radius, c):
