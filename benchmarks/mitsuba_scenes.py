@@ -71,6 +71,7 @@ PLANE_MARGIN = 1.15            # the background plane covers the view by this fa
 INTEGRATOR = {'type': 'path', 'max_depth': 4}
 FRAME_SPP = 16                 # samples per pixel outside the ball's window
 WINDOW_MARGIN_PX = 24          # the window: the outline's box and this much around it
+EMPTY_SEED = 7919              # the frames without the ball: their own sampling and noise
 
 
 @dataclass(frozen=True)
@@ -766,6 +767,24 @@ def render_repeat(scene, image, truth, k):
     return out
 
 
+def render_empty(scene, truth):
+    """
+    Render a scene without its ball: its 8-bit mono image (H, W), for a detector to refuse.
+
+    ``truth`` is the scene's first render's (``render``): its exposure's gain stays (a camera at
+    a fixed exposure, the ball gone from its view); the whole frame at FRAME_SPP.
+    """
+    mi = _mitsuba()
+    described = mitsuba_scene_dict(mi, scene)
+    del described['ball']
+    loaded = mi.load_dict(described)
+    seed = scene['seed'] + EMPTY_SEED
+    luminance = _luminance(mi, loaded, loaded.sensors()[0], FRAME_SPP, seed)
+    exposure = truth['scene']['exposure']
+    return expose(luminance, exposure['gain'], exposure['gamma'], scene['noise']['sigma_grey'],
+                  np.random.default_rng(seed))
+
+
 # --- a cache of renders ------------------------------------------------------------------------
 
 def scene_key(scene, repeat=None):
@@ -799,6 +818,16 @@ def cached(scene, folder):
     files.write_atomic(truth_path, yaml.safe_dump(truth, sort_keys=False).encode())
     files.write_atomic(png, _png(image))
     return image, truth, True
+
+
+def cached_empty(scene, truth, folder):
+    """Return the scene's frame without its ball from ``folder`` (rendered if absent); if new."""
+    path = Path(folder) / f"{scene_key(scene, 'empty')}.png"
+    if path.exists():
+        return cv2.imread(str(path), cv2.IMREAD_UNCHANGED), False
+    out = render_empty(scene, truth)
+    files.write_atomic(path, _png(out))
+    return out, True
 
 
 def cached_repeat(scene, image, truth, k, folder):

@@ -30,8 +30,9 @@ minor semi-axis) measured in the same run:
 5. the failure rate of frames with the whole ball in view (<= 1 %); a detection whose centre's ray
    misses the ball (a pattern's or a shadow's round outline measured instead) is a failure too,
    counted apart ("wrong ball") and kept out of the other figures; and images without a ball
-   (each textured background of the list, the project's renderer, the ball out of view): every
-   one must be refused ("no ball" in issue 13's bad input), a ball reported there is a false one;
+   (each textured background of the list, the ball out of view or, for Mitsuba, taken out of the
+   scene): every one must be refused ("no ball" in issue 13's bad input), a ball reported there
+   is a false one;
 6. speed on one core, 640x480: a stream of frames (each seeded by the last; target < 2 ms) and a
    single image (< 5 ms), and the render time of the project's renderer (< 4 ms);
 7. at rest, as the sphere_detector node measures (robotenis_vision.rest.RestCorrection: the conic
@@ -275,19 +276,29 @@ def project_renderer(scenes):
     return summarise('project renderer', tallies)
 
 
-def empty_images(scenes):
-    """Count, per method, the balls reported on the list's textured backgrounds without a ball."""
+def empty_images(scenes, renderer):
+    """
+    Count, per method, the balls reported on the list's textured backgrounds without a ball.
+
+    ``renderer``: 'project' (robotenis_sim.camera_model, the ball out of view) or 'mitsuba' (the
+    scene without its ball, at its first render's exposure; cached like the others).
+    """
     textured = [s for s in scenes if s['background']['type'] not in ('dark', 'grey')]
     rng = np.random.default_rng(4)
     false = {m: [] for m in METHODS}
     for scene in textured:
-        _, kw = project_scene(scene)
-        image = cm.render(CAM, OUT_OF_VIEW, R, rng, **kw)
+        if renderer == 'project':
+            _, kw = project_scene(scene)
+            image, cam, gamma = cm.render(CAM, OUT_OF_VIEW, R, rng, **kw), CAM, kw['gamma']
+        else:
+            _, truth, _ = ms.cached(scene, CACHE)
+            image, cam = ms.cached_empty(scene, truth, CACHE)[0], PINHOLE
+            gamma = truth['scene']['exposure']['gamma']
         for m in METHODS:
-            if not isinstance(attempt(image, CAM, m, kw['gamma']), str):
+            if not isinstance(attempt(image, cam, m, gamma), str):
                 false[m].append(f"{scene['id']} ({scene['background']['type']})")
-    print(f"   no ball in view, the project's renderer: {len(textured)} textured backgrounds of "
-          'the list (checkered, gradient, random texture), each must be refused; false balls: '
+    print(f'   no ball in view, {renderer} renderer: {len(textured)} textured backgrounds of the '
+          'list (checkered, gradient, random texture), each must be refused; false balls: '
           + ', '.join(f'{m} {len(v)}' for m, v in false.items()))
     print(f"   model's false balls: {', '.join(false['model']) or 'none'}")
 
@@ -543,8 +554,9 @@ def main():
         print('mitsuba is not installed (benchmarks/requirements.txt): the scene list needs it')
         return 1
     project = project_renderer(scenes)
-    empty_images(scenes)
+    empty_images(scenes, 'project')
     mitsuba_figures = mitsuba(scenes)
+    empty_images(scenes, 'mitsuba')
     print('targets (issue 13):')
     verdicts('project renderer', project)
     verdicts('Mitsuba', mitsuba_figures)
