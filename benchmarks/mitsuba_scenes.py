@@ -822,20 +822,21 @@ def cached(scene, folder):
 
 def cached_empty(scene, truth, folder):
     """Return the scene's frame without its ball from ``folder`` (rendered if absent); if new."""
-    path = Path(folder) / f"{scene_key(scene, 'empty')}.png"
-    if path.exists():
-        return cv2.imread(str(path), cv2.IMREAD_UNCHANGED), False
-    out = render_empty(scene, truth)
-    files.write_atomic(path, _png(out))
-    return out, True
+    return _cached_frame(Path(folder) / f"{scene_key(scene, 'empty')}.png",
+                         lambda: render_empty(scene, truth))
 
 
 def cached_repeat(scene, image, truth, k, folder):
     """Return the k-th repeated frame of a scene from ``folder`` (rendered if absent); if new."""
-    path = Path(folder) / f'{scene_key(scene, k)}.png'
+    return _cached_frame(Path(folder) / f'{scene_key(scene, k)}.png',
+                         lambda: render_repeat(scene, image, truth, k))
+
+
+def _cached_frame(path, make):
+    """Return the PNG at ``path``, or ``make()``'s frame stored there; and whether it is new."""
     if path.exists():
         return cv2.imread(str(path), cv2.IMREAD_UNCHANGED), False
-    out = render_repeat(scene, image, truth, k)
+    out = make()
     files.write_atomic(path, _png(out))
     return out, True
 
