@@ -50,6 +50,15 @@ MEASURED = 3                   # confirmed spheres measured, best first
 MAX_RMS = 2.5                  # model fit: residual RMS over the noise beyond which it misfits
 MIN_KEPT = 0.6                 # model fit: of the pixels its robust weights must keep
 REFITS, REFIT_PX = 3, 0.5      # model fit: again around its outline if it moved this far
+# model fit from a search: from its outline, and from one START_PX larger (px). A fit left with
+# its outline inside the ball's (the levels' ramps taking the edge's shoulder) reads the ball
+# too far: on benchmarks/vision.py's list, in every frame so left (15, 4-68 mm too far) the fit
+# from the larger start found the ball; a fit from a smaller one did in 10
+START_PX = (0.0, 1.5)
+# the larger start's fit is taken if it costs less than this share of the first's: those 15
+# frames' fits cost 1.3-3.2 times the ball's; where the costs were closer, the model's own misfit
+# (a defocus disc, a gloss) also moved its minimum, by up to 40 mm (model_fit.scores)
+SWITCH_COST = 0.8
 MAX_FLIPS = 6                  # sign changes of the edge's step around the outline, at most
 # unless its limb varies less than this against its step (ModelFit.limb_variation): the 95th
 # percentile of the balls of benchmarks/vision.py's scenes on the project's renderer
@@ -353,10 +362,7 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
     often on a checkerboard, but its limb stays smooth; a false outline on a pattern changes sign
     all the time and its inner side jumps with the outer one (MAX_FLIPS and MAX_LIMB_VARIATION
     together). ``blur``: a previous frame's (px), or None from a search; then the model is fitted
-    twice: first without the limb's shading, which pulls an outline a pixel or two off into
-    place; and a fit whose outline then moved REFIT_PX or more is made again from where it ended
-    (at most REFITS times): its annulus was cut around the start, and a search's sphere a few
-    pixels off (a part of the outline, a checkerboard's square beside it) leaves the fit halfway.
+    from several starts around the search's sphere (_fit_from_search).
     A specular highlight found on the ball's disc around c0 (``highlight.fit``), or a previous
     model fit's ``lobe`` of the same ball (its Highlight, or None for none), is taken out of the
     pixels the fit uses; LOOK looks for one.
@@ -370,19 +376,13 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
         r = camera.apparent_radius(c0, radius)
         return baseline.detect(img, camera, radius, centre, r)
     if method == 'model':
-        from_search = blur is None
-        if from_search:
-            first = model_fit.fit(img, camera, radius, c0, 1.5, gamma, iterations=4, limb=False)
-            c0, blur = first.c, first.blur
-        elif lobe is LOOK:                  # at rest: c0 and its blur from the frame before
-            lobe = highlight.fit(img, camera, c0, radius, blur, gamma)
-        fit = model_fit.fit(img, camera, radius, c0, blur, gamma, noise_levels=noise_levels,
-                            highlight=None if lobe is LOOK else lobe)
-        for _ in range(REFITS if from_search else 0):
-            if max(model_fit.outline_offset(camera, radius, c0, fit.c)) < REFIT_PX:
-                break
-            c0 = fit.c
-            fit = model_fit.fit(img, camera, radius, c0, fit.blur, gamma)
+        if blur is None:
+            fit = _fit_from_search(img, camera, radius, c0, gamma)
+        else:
+            if lobe is LOOK:                # at rest: c0 and its blur from the frame before
+                lobe = highlight.fit(img, camera, c0, radius, blur, gamma)
+            fit = model_fit.fit(img, camera, radius, c0, blur, gamma, noise_levels=noise_levels,
+                                highlight=lobe)
         if lobe is LOOK:                    # from a search: where the fit ended, and again
             lobe = highlight.fit(img, camera, fit.c, radius, fit.blur, gamma)
             if lobe is not None:
@@ -424,6 +424,51 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
         _check_arc(det.edge_points, camera.to_pixels(det.position[:2] / det.position[2]))
     det.extra.update(psf_sigma=sigma, edge_fraction=fraction)
     return det
+
+
+def _fit_from_search(img, camera, radius, c0, gamma):
+    """
+    Return the model fit of the ball whose outline lies near a search's sphere c0 (m).
+
+    First without the limb's shading, which pulls the outline a pixel or two into place; then
+    from there and from the outlines START_PX larger (a search's radius can be a few pixels off,
+    and a fit started inside the ball's outline can stay there). The fit from there is kept
+    unless another explains the pixels clearly better (model_fit.scores: SWITCH_COST).
+    DetectionError when no fit can be made.
+    """
+    first = model_fit.fit(img, camera, radius, c0, 1.5, gamma, iterations=4, limb=False)
+    r = camera.apparent_radius(first.c, radius)
+    fits, error = {}, None
+    for dr in START_PX:
+        try:
+            fits[dr] = _refitted(img, camera, radius, first.c * r / (r + dr), first.blur, gamma)
+        except DetectionError as e:
+            error = error or e
+    if not fits:
+        raise error
+    if len(fits) == 1:
+        return fits.popitem()[1]
+    cost = dict(zip(fits, model_fit.scores(img, camera, radius, list(fits.values()), gamma)))
+    best = min(cost, key=cost.get)
+    if START_PX[0] in cost and cost[best] > SWITCH_COST * cost[START_PX[0]]:
+        best = START_PX[0]
+    return fits[best]
+
+
+def _refitted(img, camera, radius, c0, blur, gamma):
+    """
+    Return the model fit from sphere c0, made again from where it ended while it moves.
+
+    A fit whose outline moved REFIT_PX or more is made again (at most REFITS times): its annulus
+    was cut around the start, and a start a few pixels off leaves the fit halfway.
+    """
+    fit = model_fit.fit(img, camera, radius, c0, blur, gamma)
+    for _ in range(REFITS):
+        if max(model_fit.outline_offset(camera, radius, c0, fit.c)) < REFIT_PX:
+            break
+        c0 = fit.c
+        fit = model_fit.fit(img, camera, radius, c0, fit.blur, gamma)
+    return fit
 
 
 def _conic(xy, ideal, camera, radius, weights, c0):
