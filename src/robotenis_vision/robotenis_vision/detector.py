@@ -50,11 +50,11 @@ MEASURED = 3                   # confirmed spheres measured, best first
 MAX_RMS = 2.5                  # model fit: residual RMS over the noise beyond which it misfits
 MIN_KEPT = 0.6                 # model fit: of the pixels its robust weights must keep
 REFITS, REFIT_PX = 3, 0.5      # model fit: again around its outline if it moved this far
-# model fit from a search: from its outline, and from one START_PX larger (px). A fit left with
-# its outline inside the ball's (the levels' ramps taking the edge's shoulder) reads the ball
-# too far: on benchmarks/vision.py's list, in every frame so left (15, 4-68 mm too far) the fit
-# from the larger start found the ball; a fit from a smaller one did in 10
-START_PX = (0.0, 1.5)
+# model fit from a search: from its outline, and from one LARGER_START_PX larger. A fit left
+# with its outline inside the ball's (the levels' ramps taking the edge's shoulder) reads the
+# ball too far: on benchmarks/vision.py's list, in every frame so left (15, 4-68 mm too far) the
+# fit from the larger start found the ball; a fit from one as much smaller did in 10
+LARGER_START_PX = 1.5
 # the larger start's fit is taken if it costs less than this share of the first's: those 15
 # frames' fits cost 1.3-3.2 times the ball's; where the costs were closer, the model's own misfit
 # (a defocus disc, a gloss) also moved its minimum, by up to 40 mm (model_fit.scores)
@@ -362,7 +362,7 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
     often on a checkerboard, but its limb stays smooth; a false outline on a pattern changes sign
     all the time and its inner side jumps with the outer one (MAX_FLIPS and MAX_LIMB_VARIATION
     together). ``blur``: a previous frame's (px), or None from a search; then the model is fitted
-    from several starts around the search's sphere (_fit_from_search).
+    from the search's sphere and from one LARGER_START_PX larger (_fit_from_search).
     A specular highlight found on the ball's disc around c0 (``highlight.fit``), or a previous
     model fit's ``lobe`` of the same ball (its Highlight, or None for none), is taken out of the
     pixels the fit uses; LOOK looks for one.
@@ -431,28 +431,31 @@ def _fit_from_search(img, camera, radius, c0, gamma):
     Return the model fit of the ball whose outline lies near a search's sphere c0 (m).
 
     First without the limb's shading, which pulls the outline a pixel or two into place; then
-    from there and from the outlines START_PX larger (a search's radius can be a few pixels off,
-    and a fit started inside the ball's outline can stay there). The fit from there is kept
-    unless another explains the pixels clearly better (model_fit.scores: SWITCH_COST).
-    DetectionError when no fit can be made.
+    from there and from the outline LARGER_START_PX larger (a search's radius can be a few pixels
+    off, and a fit started inside the ball's outline can stay there). The fit from there is kept
+    unless the other's outline lies apart from it and explains the pixels clearly better
+    (model_fit.scores: SWITCH_COST); if the fit from there fails, the other is taken.
+    DetectionError when neither can be made.
     """
     first = model_fit.fit(img, camera, radius, c0, 1.5, gamma, iterations=4, limb=False)
     r = camera.apparent_radius(first.c, radius)
-    fits, error = {}, None
-    for dr in START_PX:
+    fits, error = [], None
+    for c in (first.c, first.c * (r / (r + LARGER_START_PX))):
         try:
-            fits[dr] = _refitted(img, camera, radius, first.c * r / (r + dr), first.blur, gamma)
+            fits.append(_refitted(img, camera, radius, c, first.blur, gamma))
         except DetectionError as e:
-            error = error or e
-    if not fits:
-        raise error
-    if len(fits) == 1:
-        return fits.popitem()[1]
-    cost = dict(zip(fits, model_fit.scores(img, camera, radius, list(fits.values()), gamma)))
-    best = min(cost, key=cost.get)
-    if START_PX[0] in cost and cost[best] > SWITCH_COST * cost[START_PX[0]]:
-        best = START_PX[0]
-    return fits[best]
+            error = e if error is None else error
+    if len(fits) < 2:
+        if not fits:
+            raise error
+        return fits[0]
+    if max(model_fit.outline_offset(camera, radius, fits[0].c, fits[1].c)) < REFIT_PX:
+        return fits[0]
+    try:
+        cost = model_fit.scores(img, camera, radius, fits, gamma)
+    except DetectionError:          # the two outlines' common annulus leaves the image
+        return fits[0]
+    return fits[1] if cost[1] < SWITCH_COST * cost[0] else fits[0]
 
 
 def _refitted(img, camera, radius, c0, blur, gamma):

@@ -460,38 +460,46 @@ def _weights(r, w0, ann, scale, noise):
     return w0 * tukey * per_bin[ann.bins]
 
 
-def scores(img, camera, R, fits, gamma=1.0, irls=5):
+def scores(img, camera, R, fits, gamma=1.0, irls=4):
     """
     Return how badly each of ``fits`` (ModelFits of one image) explains the image: (n,) costs.
 
     Fits from different starts each weigh their own annulus and noise; to compare them, every
     sphere (its centre and blur held) is scored on one annulus that holds all their outlines,
-    with one robust scale (their median noise): the levels and beta refitted by ``irls`` rounds
-    of Tukey's weights, the score the sum of Tukey's rho.
+    with one robust scale (their median noise, floored at SCALE_FLOOR): the levels and beta
+    fitted by weighted least squares, then ``irls`` rounds with Tukey's weights; the score is
+    the sum of Tukey's rho. DetectionError when that annulus leaves the image.
     """
     c_mid = np.mean([f.c for f in fits], axis=0)
-    spread = max(max(outline_offset(camera, R, c_mid, f.c)) for f in fits)
+    spread = max(sum(outline_offset(camera, R, c_mid, f.c)) for f in fits)
     r_mid = camera.apparent_radius(c_mid, R)
-    s_max = max(f.blur for f in fits)
-    outer = min(float(np.clip(3 * s_max + 2.0, 3.5, 6.0)), max(2.5, 0.3 * r_mid)) + spread
+    outer = _outer_px(max(f.blur for f in fits), r_mid) + spread
     ann = annulus(img, camera, c_mid, R, outer, max(2.5, INNER * r_mid) + spread)
     y, w0 = linearise(ann.values, gamma)
     w0 = w0 * ann.usable
-    scale = float(np.median([f.noise for f in fits]))
+    scale = max(float(np.median([f.noise for f in fits])), SCALE_FLOOR)
     return np.array([_tukey_cost(ann, camera, R, f, y, w0, scale, irls) for f in fits])
 
 
 def _tukey_cost(ann, camera, R, fit, y, w0, scale, irls):
     """Return the sum of Tukey's rho of the annulus's residuals to fit's sphere and blur."""
     X, H = columns(geometry(ann, camera, fit.c, R), ann, fit.blur)[:2]
-    w = w0
-    for _ in range(irls):
+
+    def scaled_residuals(w):
         beta, levels = _solve(X, H, y, w, ann)[:2]
-        u = (y - np.einsum('ni,ni->n', X, levels[ann.bins]) - H @ beta) * np.sqrt(w0) / (
-            TUKEY * scale)
-        w = np.where((w0 > 0) & (np.abs(u) < 1), w0 * (1 - u * u) ** 2, 0.0)
+        r = y - np.einsum('ni,ni->n', X, levels[ann.bins]) - H @ beta
+        return r * np.sqrt(w0) / (TUKEY * scale)
+
+    u = scaled_residuals(w0)
+    for _ in range(irls):
+        u = scaled_residuals(np.where((w0 > 0) & (np.abs(u) < 1), w0 * (1 - u * u) ** 2, 0.0))
     u = u[w0 > 0]
     return float(np.sum(np.where(np.abs(u) < 1, 1 - (1 - u * u) ** 3, 1.0)))
+
+
+def _outer_px(s, r_px):
+    """Return how far outside the outline (px) a fit's annulus reaches, at blur s, radius r_px."""
+    return min(float(np.clip(3 * s + 2.0, 3.5, 6.0)), max(2.5, 0.3 * r_px))
 
 
 def linearise(values, gamma):
@@ -526,7 +534,7 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
     c = np.asarray(c0, dtype=float).copy()
     s = float(np.clip(blur0, *BLUR_RANGE))
     r_px = camera.apparent_radius(c, R)
-    outer = min(float(np.clip(3 * s + 2.0, 3.5, 6.0)), max(2.5, 0.3 * r_px))
+    outer = _outer_px(s, r_px)
     ann = annulus(img, camera, c, R, outer, max(2.5, INNER * r_px))
     y, w0 = linearise(ann.values, gamma)
     w0 = w0 * ann.usable

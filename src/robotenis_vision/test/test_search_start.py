@@ -2,10 +2,10 @@
 The model fit from a search's sphere whose outline is a pixel or two too small.
 
 Rendered by robotenis_sim's camera model: a glossy ball, defocused by a 1.4 px disc, on a
-gradient, lit from the front. Its search's sphere reads 50-65 mm far at 0.53 m (its outline about
-2 px small); a fit from there alone stopped 15-30 mm far in 3 of 6 such frames of
-benchmarks/vision.py's list, its outline a pixel inside the ball's, the levels' ramps taking the
-edge's shoulder. Tolerance: a frame's error along the line of sight lies within 5 standard
+gradient, lit from the front. Its search's sphere reads 57-65 mm far at 0.55 m (its outline about
+2 px small); a fit from there alone stopped 15-20 mm far in 2 of 6 such frames of
+benchmarks/vision.py's list, its outline inside the ball's, the levels' ramps taking the edge's
+shoulder. Tolerance: a frame's error along the line of sight lies within 5 standard
 deviations of its own covariance from the frames' median (a chance of 6e-7 a frame for the
 fit's Gaussian noise; what is common to the frames, the bias, is left out).
 """
