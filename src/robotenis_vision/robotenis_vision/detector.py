@@ -431,31 +431,23 @@ def _fit_from_search(img, camera, radius, c0, gamma):
     Return the model fit of the ball whose outline lies near a search's sphere c0 (m).
 
     First without the limb's shading, which pulls the outline a pixel or two into place; then
-    from there and from the outline LARGER_START_PX larger (a search's radius can be a few pixels
-    off, and a fit started inside the ball's outline can stay there). The fit from there is kept
-    unless the other's outline lies apart from it and explains the pixels clearly better
-    (model_fit.scores: SWITCH_COST); if the fit from there fails, the other is taken.
-    DetectionError when neither can be made.
+    from there (DetectionError if that fit cannot be made) and from the outline LARGER_START_PX
+    larger: a search's radius can be a few pixels off, and a fit started inside the ball's
+    outline can stay there. The fit from there is kept unless the other's outline lies apart
+    from it and explains the pixels clearly better (model_fit.scores: SWITCH_COST).
     """
     first = model_fit.fit(img, camera, radius, c0, 1.5, gamma, iterations=4, limb=False)
+    fit = _refitted(img, camera, radius, first.c, first.blur, gamma)
     r = camera.apparent_radius(first.c, radius)
-    fits, error = [], None
-    for c in (first.c, first.c * (r / (r + LARGER_START_PX))):
-        try:
-            fits.append(_refitted(img, camera, radius, c, first.blur, gamma))
-        except DetectionError as e:
-            error = e if error is None else error
-    if len(fits) < 2:
-        if not fits:
-            raise error
-        return fits[0]
-    if max(model_fit.outline_offset(camera, radius, fits[0].c, fits[1].c)) < REFIT_PX:
-        return fits[0]
     try:
-        cost = model_fit.scores(img, camera, radius, fits, gamma)
-    except DetectionError:          # the two outlines' common annulus leaves the image
-        return fits[0]
-    return fits[1] if cost[1] < SWITCH_COST * cost[0] else fits[0]
+        larger = _refitted(img, camera, radius, first.c * (r / (r + LARGER_START_PX)),
+                           first.blur, gamma)
+        if max(model_fit.outline_offset(camera, radius, fit.c, larger.c)) < REFIT_PX:
+            return fit
+        cost = model_fit.scores(img, camera, radius, [fit, larger], gamma)
+    except DetectionError:          # no fit from there, or the two outlines leave the image
+        return fit
+    return larger if cost[1] < SWITCH_COST * cost[0] else fit
 
 
 def _refitted(img, camera, radius, c0, blur, gamma):
