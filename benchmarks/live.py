@@ -133,7 +133,7 @@ def main():
     parser.add_argument('--frames', type=int, default=demo.LIVE_FRAMES)
     parser.add_argument('--settle', type=float, default=demo.LIVE_SETTLE)
     parser.add_argument('--seed', type=int, default=1)
-    parser.add_argument('--selection', default='boundary', choices=poses.SELECTIONS,
+    parser.add_argument('--selection', default=poses.SESSION_SELECTION, choices=poses.SELECTIONS,
                         help="the sessions' pose selection (poses.select)")
     parser.add_argument('--images-only', action='store_true',
                         help='only the links apart, no session through ROS')

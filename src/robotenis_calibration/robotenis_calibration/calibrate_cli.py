@@ -82,8 +82,9 @@ def main(argv=None):
                         help='call the calibrate service of a running system')
     parser.add_argument('--poses', type=int, default=0)
     parser.add_argument('--frames', type=int, default=0)
-    parser.add_argument('--selection', default='boundary',
-                        choices=('boundary', 'optimal', 'discriminating'))
+    parser.add_argument('--selection', default='',
+                        choices=('boundary', 'optimal', 'discriminating'),
+                        help="the session's pose selection (with --call; default: the service's)")
     parser.add_argument('--bag', default='',
                         help='bag path for the recorded session (with --call)')
     parser.add_argument('--namespace', default='', help="the system's namespace (with --call)")

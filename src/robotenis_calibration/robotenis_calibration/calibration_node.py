@@ -304,8 +304,9 @@ class CalibrationNode(Node):
             raise ValueError(f'request refused, nothing was moved: {refused}')
         rng = np.random.default_rng(request.seed)
         max_range = self.get_parameter('max_range').value
+        selection = request.pose_selection or poses.SESSION_SELECTION
         planned = poses.central_first(declared, guess, poses.select(
-            request.pose_selection or 'boundary', declared, guess, n, rng, max_range))
+            selection, declared, guess, n, rng, max_range))
         stamp = time.strftime('%Y%m%d-%H%M%S')
         bag = request.bag_path or os.path.join(self.get_parameter('bags_dir').value,
                                                f'session-{stamp}')
@@ -313,7 +314,7 @@ class CalibrationNode(Node):
                                    f'calibration-{stamp}.yaml')
         self.open_bag(bag, description.dumps(declared))
         self.get_logger().info(f'session: {len(planned)} poses'
-                               f' ({request.pose_selection or "boundary"}), '
+                               f' ({selection}), '
                                f'{config.frames_per_pose} frames each, recording {bag}')
 
         def replan(rests, n):
@@ -321,8 +322,7 @@ class CalibrationNode(Node):
                                           [np.mean(r.sphere, axis=0) for r in rests])
             moved = np.linalg.norm(refined - guess)
             try:
-                again = poses.select(request.pose_selection or 'boundary', declared, refined, n,
-                                     rng, max_range)
+                again = poses.select(selection, declared, refined, n, rng, max_range)
             except ValueError as e:
                 self.get_logger().warn(f'ball guess refined from {len(rests)} rests, but {e}:'
                                        ' the plan is kept')

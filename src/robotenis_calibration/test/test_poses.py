@@ -93,13 +93,19 @@ def test_a_discriminating_design_tells_the_named_effects_apart_better():
 
     The discriminating design exists to make every named effect's own information, beyond the
     geometry and the other effects, larger than the paper's random boundary poses and the
-    15-parameter D-optimal design leave it: it must, for each effect.
+    15-parameter D-optimal design leave it: it must, for each effect, drawn from the same field
+    as they are. From its own narrower field (DESIGN_FIELD) its every ball lies in that field.
     """
     truth, declared = sim_truth.load(), description.nominal()
     guess = truth.sphere_position - truth.camera_translation
-    found = {method: effect_information(declared, poses.select(
-        method, declared, guess, 90, np.random.default_rng(6), max_range=0.40))
-        for method in poses.SELECTIONS}
+    designs = {method: poses.select(method, declared, guess, 90, np.random.default_rng(6),
+                                    max_range=0.40) for method in poses.SELECTIONS}
+    assert np.all(poses.off_axis(declared, guess, designs['discriminating'])
+                  <= poses.DESIGN_FIELD + 1e-12)
+    designs['discriminating'] = poses.discriminating(declared, guess, 90,
+                                                     np.random.default_rng(6), max_range=0.40,
+                                                     field=1.0)
+    found = {method: effect_information(declared, P) for method, P in designs.items()}
     for name in poses.DISCRIMINATED:
         for other in ('boundary', 'optimal'):
             assert found['discriminating'][name] > found[other][name], (name, other, found)

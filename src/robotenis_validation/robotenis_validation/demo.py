@@ -162,7 +162,7 @@ def ros_session(nominal, truth, args):
     try:
         status = service_client.call(SimpleNamespace(
             poses=args.ros_poses, frames=args.frames, settle=args.settle, seed=args.seed,
-            selection=getattr(args, 'selection', 'boundary'), bag=bag))
+            selection=getattr(args, 'selection', ''), bag=bag))
     finally:
         launcher.check()
         launcher.stop()
