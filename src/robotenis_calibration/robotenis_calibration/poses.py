@@ -48,11 +48,9 @@ PLAN_RANGE = (0.20, 0.55)      # m along the optical axis: inside the detector's
 IMAGE_MAX_RANGE = 0.40         # m: the farthest for a session measured through the detector
 PLAN_HALF_FIELD = (0.45, 0.33)  # tan of the usable half field of view, x, y (640x480, f = 500 px)
 SELECTIONS = ('boundary', 'optimal', 'discriminating')
-# of the usable half field: where the discriminating design draws its poses from. A design puts
-# its poses at the edges of its pool, and the detector's bias grows off the axis; through rendered
-# images (seeds 11-12, seven hidden effects, 90 poses within 0.40 m) the design named the effect
-# right in 3 of 14 sessions from the whole field, 9 from 0.8 of it and 12 from 0.6 (boundary
-# poses: 8)
+# of the usable half field: where the discriminating design draws its poses from (a design puts
+# its poses at the edges of its pool, where the detector's bias is largest; 0.8 and 0.45 of the
+# field named 9 and 11 of the 14 sessions that 0.6 named 12 of: module docstring)
 DESIGN_FIELD = 0.6
 # a session's poses when its request names none: through the nodes (`./robotenis bench live`,
 # seeds 1 and 2) this design named the hidden effect alone in 7 and 6 of 7 sessions (held-out
