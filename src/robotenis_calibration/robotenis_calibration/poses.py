@@ -53,8 +53,8 @@ SELECTIONS = ('boundary', 'optimal', 'discriminating')
 # field named 9 and 11 of the 14 sessions that 0.6 named 12 of: module docstring)
 DESIGN_FIELD = 0.6
 # a session's poses when its request names none: through the nodes (`./robotenis bench live`,
-# seeds 1 and 2) this design named the hidden effect alone in 7 and 6 of 7 sessions (held-out
-# error against the truth 0.022-0.077 mm), the paper's boundary poses in 4 of 7 in each of
+# seeds 1-3) this design named the hidden effect alone in 7, 6 and 7 of 7 sessions (held-out
+# error against the truth 0.019-0.085 mm), the paper's boundary poses in 4 of 7 in each of
 # seeds 1-3 (0.011-0.112 mm)
 SESSION_SELECTION = 'discriminating'
 # the named effects whose parameters a discriminating design makes estimable beside the 15
