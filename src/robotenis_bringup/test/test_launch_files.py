@@ -92,10 +92,13 @@ def test_sim_time_puts_the_simulator_and_the_visual_loop_in_lockstep():
     assert nodes['sim_motors']['lockstep'] is True and nodes['hand_camera']['tick_on_effector']
     assert nodes['motion_controller']['tick_on_joint_states'] is True
     assert nodes['sim_motors']['camera_rate'] == 120.0
+    # the tracking loop at real time at most, as the ball flies; a session as fast as it can
+    assert nodes['sim_motors']['speed'] == 1.0
     calibration = {n.name: n.parameters
                    for n in launch_file.load(launch_file.find('calibration.launch.yaml'),
                                              {'sim_time': 'true'})}
     assert 'pbvs_tracker' not in calibration and calibration['sim_motors']['camera_rate'] == 120.0
+    assert calibration['sim_motors']['speed'] == 0.0
     # a calibration session waits for the detector at rest; the tracking loop for its commands
     assert calibration['sim_motors']['visual_answer'] == 'detection'
     assert calibration['sim_motors']['visual_rest_speed'] > 0

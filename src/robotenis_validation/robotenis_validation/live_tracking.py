@@ -279,8 +279,7 @@ class LiveTracking:
         Return the simulated time tracking is steady from.
         """
         goal_pub = self.node.create_publisher(PointStamped, '/goal', 10)
-        self.spin_until(lambda: self.probe.now > 0 and self.node.count_subscribers('/goal') > 0,
-                        'starting')
+        self.spin_until(self.loop_ready, 'starting')
         goal_pub.publish(point_stamped(self.setup.robot_centre, TimeMsg(), BASE_FRAME))
         t_goal = self.probe.now
         self.spin_until(lambda: self.probe.now >= t_goal + GOAL_S,
@@ -300,6 +299,19 @@ class LiveTracking:
         self.say(f'tracking from {t_seen:.2f} s, counted from {self.probe.now:.2f} s (simulated), '
                  f'{time.perf_counter() - self.wall_start:.0f} s after launch')
         return self.probe.now
+
+    def loop_ready(self):
+        """
+        Return whether simulated time runs and the probe's graph has every node of the loop.
+
+        A node that starts late (its imports, on a loaded machine) would find the tracker on and
+        the ball elsewhere: the detector publishing, the tracker (and the probe) listening to it,
+        the tracker commanding, the controller taking goals.
+        """
+        publishers, subscribers = self.node.count_publishers, self.node.count_subscribers
+        return (self.probe.now > 0 and subscribers('/goal') > 0
+                and publishers('/sphere/position') > 0 and subscribers('/sphere/position') > 1
+                and publishers('/cmd_vel_cartesian') > 0)
 
     def steady(self):
         """Return whether the last STEADY_FRAMES detections are within STEADY_M of s_d."""
