@@ -102,6 +102,8 @@ def test_sim_time_puts_the_simulator_and_the_visual_loop_in_lockstep():
     # a calibration session waits for the detector at rest; the tracking loop for its commands
     assert calibration['sim_motors']['visual_answer'] == 'detection'
     assert calibration['sim_motors']['visual_rest_speed'] > 0
+    # beside a busy process the detector's fits at rest answered later than 1 s of wall time
+    assert calibration['sim_motors']['visual_timeout'] >= 5.0
     # the frames the simulator may run ahead at rest fit in the detector's queue
     ahead = calibration['sim_motors']['visual_delay'] * calibration['sim_motors']['camera_rate']
     assert calibration['sphere_detector']['image_queue'] > ahead
