@@ -304,9 +304,9 @@ class LiveTracking:
         """
         Return whether simulated time runs and the probe's graph has every node of the loop.
 
-        A node that starts late (its imports, on a loaded machine) would find the tracker on and
-        the ball elsewhere: the detector publishing, the tracker (and the probe) listening to it,
-        the tracker commanding, the controller taking goals.
+        Every node: the detector publishing, the tracker (and the probe) listening to it, the
+        tracker commanding, the controller taking goals. A node that starts late (its imports, on
+        a loaded machine) would otherwise find the tracker on and the ball elsewhere.
         """
         publishers, subscribers = self.node.count_publishers, self.node.count_subscribers
         return (self.probe.now > 0 and subscribers('/goal') > 0
