@@ -24,7 +24,7 @@ more rests (SessionRunner's ``replan``).
   0.048; FK at 300 common boundary poses less their offset, median 0.033 against 0.034 mm), and
   through an unbiased detector (the noise model, seeds 11-13) 21 of 21 as from the whole field
   (FK over the workspace 0.23 mm, boundary's 0.62; medians). The sessions' default
-  (SESSION_SELECTION); README, "Poses chosen to tell the effects apart".
+  (SESSION_SELECTION); docs/investigations.md, "Poses chosen to tell the effects apart".
 
 How far the ball may be (``max_range``, along the optical axis) trades two things. A rest's
 systematic error in depth grows as the square of the range (an error of e px in the outline's

@@ -13,19 +13,20 @@ Methods (all return the sphere centre in the optical frame, m, with a covariance
 * ``'baseline'``: a midpoint threshold, the largest round contour, OpenCV's fitEllipse
   (robotenis_vision.baseline).
 
-Without a prior the balls are looked for (robotenis_vision.search): open discs, sharp round
-outlines and radial-symmetry votes give candidates, the steep points of rays from each must agree
-on one sphere of the known radius (RANSAC); the spheres whose outline shows the longest arc of
-edge on one ellipse (round_arc: a checkerboard's square meets its inscribed circle only near
-four points) are measured; each must show its edge around MIN_ARC of its outline, and on one
-ellipse over MIN_ROUND_SHARE of it (a texture's round blob does not); a sphere seen on a bigger
-ball's disc is a mark on it (_on_ball), not a ball. The balls measured are ranked by
-the round arc of their measured outline (a search's sphere a few pixels off shows none) times
-the model fit's clarity. Two balls measured in the image, each clear to the model fit (its edge
-around the outline, its pixels kept: SECOND_BALL), alike (contrast and blur: _alike) and round
-alike (SECOND_ROUND), make it ambiguous: it is refused (DetectionError), by every method. With a
-prior (the previous frame's Detection), the outline is measured where it was, and the search
-runs only if it is not found there.
+Without a prior, a ball alone in a plain image (no other edge steep enough for the search to take)
+is measured from its rough circle (lone_ball); otherwise the balls are looked for
+(robotenis_vision.search): open discs, sharp round outlines and radial-symmetry votes give
+candidates, the steep points of rays from each must agree on one sphere of the known radius
+(RANSAC); the spheres whose outline shows the longest arc of edge on one ellipse (round_arc: a
+checkerboard's square meets its inscribed circle only near four points) are measured; each must
+show its edge around MIN_ARC of its outline, and on one ellipse over MIN_ROUND_SHARE of it (a
+texture's round blob does not); a sphere seen on a bigger ball's disc is a mark on it (_on_ball),
+not a ball. The balls measured are ranked by the round arc of their measured outline (a search's
+sphere a few pixels off shows none) times the model fit's clarity. Two balls measured in the image,
+each clear to the model fit (its edge around the outline, its pixels kept: SECOND_BALL), alike
+(contrast and blur: _alike) and round alike (SECOND_ROUND), make it ambiguous: it is refused
+(DetectionError), by every method. With a prior (the previous frame's Detection), the outline is
+measured where it was, and the search runs only if it is not found there.
 
 The outline is measured in ideal (undistorted) pixels, K [x, y, 1] for the ray (x, y, 1): there the
 sphere's outline is exactly an ellipse. Frames that cannot be trusted raise DetectionError with
@@ -34,6 +35,7 @@ outline with contrast.
 """
 from dataclasses import replace
 
+import cv2
 import numpy as np
 
 from robotenis_vision import baseline, conic, edges, highlight, model_fit, paper_method, search
@@ -75,6 +77,13 @@ SECOND_ROUND = 0.5             # and round over this much of the first's share
 # textured backgrounds of benchmarks/vision.py's list without a ball (the project's renderer)
 # showed 0-0.33 (17 of 23 under 0.2), the balls of its frames on those backgrounds 0.24 and more
 MIN_ROUND_SHARE = 0.2
+# lone_ball: how far beyond a ball's outline its own edge may still be steep, px: before it is
+# measured, (a + b r) for an apparent radius r (a search's sphere can be a few px off, its blur
+# unknown); once measured, (a + b s) for its blur s: a Gaussian-blurred step of 255 grey levels
+# is steep (search.steep) to 3.4 px out at s = 1 and 5.6 px at s = 2
+LONE_MARGIN = (8.0, 0.35)
+EDGE_REACH = (3.0, 3.0)
+LONE_CHAIN = 10                # px: connected steep pixels that make an edge (_steep_outside)
 MIN_ARC_MODEL = np.deg2rad(160)  # the model fits the known sphere to a shorter arc
 RAY_SPACING = 1.5              # px between profiles along the outline
 MIN_EDGE_POINTS = 16
@@ -136,6 +145,9 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=
             return det
     elif not search:
         raise ValueError('detect: search=False needs a prior (not with the baseline method)')
+    lone = lone_ball(img, camera, radius, method, gamma)
+    if lone is not None:
+        return lone
     found, failures = [], []
     for sphere in find(img, camera, radius):
         try:
@@ -217,6 +229,63 @@ def _near(img, camera, radius, method, c, gamma):
         return measure(img, camera, radius, method, sphere.c, None, gamma)
     except DetectionError:
         return None
+
+
+def lone_ball(img, camera, radius, method, gamma):
+    """
+    Return the ball of an image that shows no other edge, measured without the search, or None.
+
+    The rough circle (edges.rough_circle), confirmed by its rays, is all that the search could
+    find when no pixel outside that sphere's outline is steep enough for a ray to take a step
+    there (search.steep): no other candidate could be confirmed. That is checked around the
+    confirmed sphere's outline widened by LONE_MARGIN (before measuring: a texture fails at
+    once), then around the measured outline widened by its blur's reach (EDGE_REACH). The ball
+    must also be round over MIN_ROUND_SHARE of its outline, as from the search. None sends the
+    image to the search: a plain 640x480 image costs 25-30 ms there.
+    """
+    r_min, r_max = camera.fx * radius / RANGE[1], camera.fx * radius / RANGE[0]
+    try:
+        centre, r = edges.rough_circle(img, r_min, r_max)
+    except edges.EdgeError:
+        return None
+    sphere = search.confirm(img, camera, radius, search.Candidate(centre, r, 1.0))
+    if (sphere is None or sphere.score < MIN_SCORE or not sphere.c[2] > radius
+            or not RANGE[0] <= np.linalg.norm(sphere.c) <= RANGE[1]):
+        return None
+    steep = search.steep(img)
+    margin = LONE_MARGIN[0] + LONE_MARGIN[1] * camera.apparent_radius(sphere.c, radius)
+    if _steep_outside(steep, camera, radius, sphere.c, margin):
+        return None
+    try:
+        det = measure(img, camera, radius, method, sphere.c, None, gamma)
+    except DetectionError:
+        return None
+    reach = EDGE_REACH[0] + EDGE_REACH[1] * det.extra.get('psf_sigma', BLUR_GUESS)
+    share = _round_on(img, camera, radius, det.position)
+    if (_steep_outside(steep, camera, radius, det.position, reach)
+            or share is not None and share < MIN_ROUND_SHARE):
+        return None
+    return det
+
+
+def _steep_outside(steep, camera, radius, c, margin):
+    """
+    Return whether an edge of ``steep`` pixels lies beyond sphere c's outline widened by margin.
+
+    An edge: LONE_CHAIN connected pixels or more. A sphere is confirmed on the steps of 8 rays or
+    more, along an outline of at least 50 px: a chain of steep pixels tens long. Noise alone makes
+    steep pixels one to a few together, more where the image is brighter than its median (the
+    noise grows with the signal).
+    """
+    try:
+        pts, normals, _ = ellipse_points(camera, c, radius, spacing=4 * RAY_SPACING)
+    except DetectionError:
+        return True
+    polygon = camera.distort_pixels(pts + margin * normals)
+    outside = steep.astype(np.uint8)
+    cv2.fillPoly(outside, [np.rint(polygon).astype(np.int32)], 0)
+    _, labels = cv2.connectedComponents(outside, connectivity=8)
+    return bool(np.any(np.bincount(labels[outside > 0])[1:] >= LONE_CHAIN))
 
 
 def _model_view(img, camera, radius, det, c, gamma):
