@@ -170,19 +170,20 @@ def gradients(image):
             cv2.Sobel(smooth, cv2.CV_32F, 0, 1, ksize=3) / 8)
 
 
-def steep(image):
+def steep(image, factor=1.0):
     """
     Return where the image is steep enough for ``confirm`` to take a step there (bool, its shape).
 
     A ray takes a step of at least max(MIN_STEP, 6 sigma) grey levels (sigma the pixel noise)
     whose steepest slope is at least SHARPNESS of it: blurred by at most 1.6 px. Smoothed as
     ``gradients`` does, such a step is still at least 0.23 of it steep per px; three quarters of
-    that is the threshold. Noise reaches it at single pixels (the smoothed gradient's noise is
-    0.22 sigma a component, the threshold 4.6 of those or more): an edge is a chain of them
-    (detector.LONE_CHAIN).
+    that is the threshold (times ``factor``, for steeper edges). Noise reaches it at single pixels
+    (the smoothed gradient's noise is 0.22 sigma a component, the threshold 4.6 of those or
+    more): an edge is a chain of them (detector.LONE_CHAIN).
     """
     gx, gy = gradients(image)
-    return cv2.magnitude(gx, gy) > 0.75 * 0.23 * max(MIN_STEP, 6 * _noise(image[::4, ::2]))
+    threshold = 0.75 * 0.23 * max(MIN_STEP, 6 * _noise(image[::4, ::2]))
+    return cv2.magnitude(gx, gy) > factor * threshold
 
 
 def outline_score(gx, gy, centre, r):
