@@ -248,14 +248,12 @@ def lone_ball(img, camera, radius, method, gamma):
     must also be round over MIN_ROUND_SHARE of its outline, as from the search. None sends the
     image to the search: a plain 640x480 image costs 25-30 ms there.
     """
-    r_min, r_max = camera.fx * radius / RANGE[1], camera.fx * radius / RANGE[0]
     try:
-        centre, r = edges.rough_circle(img, r_min, r_max)
+        centre, r = edges.rough_circle(img, *_radii(camera, radius))
     except edges.EdgeError:
         return None
-    sphere = search.confirm(img, camera, radius, search.Candidate(centre, r, 1.0))
-    if (sphere is None or sphere.score < MIN_SCORE or not sphere.c[2] > radius
-            or not RANGE[0] <= np.linalg.norm(sphere.c) <= RANGE[1]):
+    sphere = _confirmed(img, camera, radius, search.Candidate(centre, r, 1.0), MIN_SCORE)
+    if sphere is None:
         return None
     steep = search.steep(img)
     margin = LONE_MARGIN[0] + LONE_MARGIN[1] * camera.apparent_radius(sphere.c, radius)
@@ -387,7 +385,7 @@ def find(img, camera, radius):
     rays' score counts any steep point within a pixel, and a checkerboard's square scores as high
     as the ball.
     """
-    r_min, r_max = camera.fx * radius / RANGE[1], camera.fx * radius / RANGE[0]
+    r_min, r_max = _radii(camera, radius)
     found = (search.open_discs(img, r_min, r_max) + search.sharp_candidates(img, r_min, r_max)
              + search.candidates(img, r_min, r_max))
     candidates = [c for c in found if not any(_inside(c, v) for v in found)]
@@ -398,9 +396,8 @@ def find(img, camera, radius):
         pass
     spheres, half_lit = [], []
     for cand in candidates:
-        sphere = search.confirm(img, camera, radius, cand)
-        if (sphere is None or sphere.score < HALF_LIT_SCORE or not sphere.c[2] > radius
-                or not RANGE[0] <= np.linalg.norm(sphere.c) <= RANGE[1]):
+        sphere = _confirmed(img, camera, radius, cand, HALF_LIT_SCORE)
+        if sphere is None:
             continue
         if sphere.score < MIN_SCORE:
             half_lit.append(sphere)
@@ -420,6 +417,24 @@ def find(img, camera, radius):
         order = sorted(range(len(spheres)), key=lambda k: (-arcs[k], -spheres[k].score))
         spheres = [spheres[k] for k in order]
     return spheres[:MEASURED]
+
+
+def _radii(camera, radius):
+    """Return the least and the most apparent radius (px) of a ball of ``radius`` within RANGE."""
+    return camera.fx * radius / RANGE[1], camera.fx * radius / RANGE[0]
+
+
+def _confirmed(img, camera, radius, candidate, least):
+    """
+    Return the sphere a candidate's rays confirm (search.confirm), or None.
+
+    None unless ``least`` of the rays or more agree on it and it lies in front, within RANGE.
+    """
+    sphere = search.confirm(img, camera, radius, candidate)
+    if (sphere is None or sphere.score < least or not sphere.c[2] > radius
+            or not RANGE[0] <= np.linalg.norm(sphere.c) <= RANGE[1]):
+        return None
+    return sphere
 
 
 def _marks_replaced(camera, R, spheres, half_lit):
