@@ -25,6 +25,12 @@ def no_search(*args):
     raise AssertionError('the whole image was searched')
 
 
+def longest_chain(steep):
+    """Return the most connected pixels (8-neighbours) of one chain in a steep map."""
+    _, labels = cv2.connectedComponents(steep.astype(np.uint8), connectivity=8)
+    return int(np.bincount(labels[steep], minlength=2)[1:].max())
+
+
 @pytest.mark.parametrize('method', ['conic', 'model'])
 def test_a_ball_alone_is_measured_without_the_search_as_the_search_measures_it(monkeypatch,
                                                                                method):
@@ -72,13 +78,10 @@ def test_noise_alone_makes_no_edge_and_the_weakest_step_a_ray_takes_does(sigma):
     for flat in (np.full((h, w), 100.0) + sigma * rng.standard_normal((h, w)),
                  ramp + shot * rng.standard_normal((h, w))):
         steep = search.steep(np.clip(flat, 0, 255).astype(np.float32))
-        _, labels = cv2.connectedComponents(steep.astype(np.uint8), connectivity=8)
-        assert np.bincount(labels[steep], minlength=2)[1:].max(initial=0) < detector.LONE_CHAIN
+        assert longest_chain(steep) < detector.LONE_CHAIN
     step = max(search.MIN_STEP, 6 * sigma)
     v, u = np.mgrid[0:h, 0:w]
     disc = (np.hypot(u - 320, v - 240) < 12.0).astype(float)
     blurred = cv2.GaussianBlur(100.0 + step * disc, (0, 0), 1.6)
     image = np.clip(blurred + sigma * rng.standard_normal((h, w)), 0, 255).astype(np.float32)
-    steep = search.steep(image)
-    _, labels = cv2.connectedComponents(steep.astype(np.uint8), connectivity=8)
-    assert np.bincount(labels[steep], minlength=2)[1:].max() >= detector.LONE_CHAIN
+    assert longest_chain(search.steep(image)) >= detector.LONE_CHAIN
