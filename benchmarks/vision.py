@@ -361,9 +361,9 @@ def bias_carriers(name, f, scenes, most=3):
     by_scene = f['model']['depth_bias_by_scene']
     worst = sorted(by_scene, key=lambda k: -by_scene[k])[:most]
     rest = [b for k, b in by_scene.items() if k not in worst]
-    described = {s['id']: describe(s) for s in scenes}
+    scene = {s['id']: s for s in scenes}
     print(f'   {name}: model depth bias, the {most} largest scenes: '
-          + '; '.join(f'{k} {100 * by_scene[k]:.2f} % ({described[k]})' for k in worst)
+          + '; '.join(f'{k} {100 * by_scene[k]:.2f} % ({describe(scene[k])})' for k in worst)
           + f'; RMS over the other {len(rest)}: {100 * np.sqrt(np.mean(np.square(rest))):.3f} %')
 
 
