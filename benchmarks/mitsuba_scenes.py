@@ -989,18 +989,22 @@ TRUTH_KEYS = ('image', 'width', 'height', 'K', 'D', 'distortion_model', 'ball', 
               'saturated_pixels', 'scene')
 
 
-def write_test_set(folder, count, seed, repeat_ids=(), repeats=0, cache=None):
+def write_test_set(folder, count, seed, repeat_ids=(), repeats=0, cache=None, empty_ids=None):
     """
     Write a small set for the tests: NNN.png and NNN.yaml (the truth), and repeated windows.
 
     For the scenes of ``repeat_ids``, ``repeats`` re-renders of the ball's window (fresh sampling
     and sensor noise, the first render's exposure) as NNN-rK.png, the window only: the truth's
-    ``renderer.window`` says where it goes. Renders come from ``cache`` when given.
+    ``renderer.window`` says where it goes. Renders come from ``cache`` when given. With
+    ``empty_ids``, only those scenes, each with its frame without the ball (``render_empty``) as
+    NNN-empty.png.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     entries = []
     for scene in scene_list(count, seed):
+        if empty_ids is not None and scene['id'] not in empty_ids:
+            continue
         if cache is None:
             image, truth = render(scene)
         else:
@@ -1024,6 +1028,11 @@ def write_test_set(folder, count, seed, repeat_ids=(), repeats=0, cache=None):
                         'direction': scene['light']['direction'],
                         'background': scene['background']['type'],
                         'material': scene['material']['type'], 'repeats': names})
+        if empty_ids is not None:
+            empty = (render_empty(scene, truth) if cache is None
+                     else cached_empty(scene, truth, cache)[0])
+            entries[-1]['empty'] = f"{scene['id']}-empty.png"
+            files.write_atomic(folder / entries[-1]['empty'], _png(empty))
     index = {'count': count, 'seed': seed, 'frame_spp': FRAME_SPP, 'images': entries}
     files.write_atomic(folder / 'index.yaml',
                        yaml.safe_dump(_plain(index), sort_keys=False).encode())
@@ -1048,6 +1057,8 @@ def main(argv=None):
     parser.add_argument('--repeats', type=int, default=0, help='with --test-set: how often')
     parser.add_argument('--cache', type=Path, default=None,
                         help='with --test-set: take the renders from this cache folder')
+    parser.add_argument('--empty', nargs='*', default=None,
+                        help='with --test-set: only these scenes, each also without its ball')
     args = parser.parse_args(argv)
     if args.verify:
         print(yaml.safe_dump(verification_report(), sort_keys=False))
@@ -1055,7 +1066,8 @@ def main(argv=None):
     if args.test_set:
         if args.out is None or args.count is None or args.seed is None:
             parser.error('--test-set needs --out, --count and --seed')
-        write_test_set(args.out, args.count, args.seed, args.repeat, args.repeats, args.cache)
+        write_test_set(args.out, args.count, args.seed, args.repeat, args.repeats, args.cache,
+                       args.empty)
         return 0
     if args.out is None or args.count is None or args.seed is None:
         parser.error('--out, --count and --seed are required')
