@@ -35,7 +35,7 @@ def load(entry):
 
 
 def test_most_checkerboards_without_the_ball_are_refused_as_patterns():
-    """At least 4 of the 6 frames without the ball are refused, each as a pattern."""
+    """At least 5 of the 6 frames without the ball are refused, each as a pattern."""
     refused, reported = [], []
     for entry in entries():
         truth, cam, _, empty = load(entry)
@@ -47,7 +47,7 @@ def test_most_checkerboards_without_the_ball_are_refused_as_patterns():
             continue
         reported.append((entry['id'], cam.project(det.position).round(0).tolist()))
     assert len(refused) + len(reported) == 6
-    assert len(refused) >= 4, f'false balls: {reported}'
+    assert len(refused) >= 5, f'false balls: {reported}'
 
 
 @pytest.mark.parametrize('entry', entries(), ids=lambda e: str(e['id']))

@@ -130,3 +130,22 @@ def test_a_square_meets_its_inscribed_circle_on_a_short_arc_and_a_ball_all_round
     inscribed = detector.round_arc(pattern.astype(np.float32), CAM, R, square)
     assert inscribed < 8 * np.arccos(20 / 21) * 20.0
     assert detector.round_arc(ball.astype(np.float32), CAM, R, C) > 2 * inscribed
+
+
+def test_a_weak_sphere_is_confirmed_again_from_where_it_lies():
+    """
+    A candidate a fifth of the radius off: its rays meet the outline aslant, under MIN_SCORE.
+
+    A dark ball over 8 px squares. Confirmed again from the sphere they found, the rays agree on
+    the ball over MIN_SCORE, and its outline lies within a pixel and a half of the truth's.
+    """
+    c = np.array([0.03, -0.02, 0.3])
+    rng = np.random.default_rng(3)
+    image = simple_render.on_background(CAM, c, R, simple_render.checkerboard(CAM, 8), rng,
+                                        ball=60.0).astype(np.float32)
+    r = CAM.apparent_radius(c, R)
+    candidate = search.Candidate(CAM.project(c) + [0.2 * r, 0.0], 0.85 * r, 1.0)
+    assert search.confirm(image, CAM, R, candidate).score < detector.MIN_SCORE
+    sphere = detector._confirmed(image, CAM, R, candidate, detector.MIN_SCORE)
+    assert sphere is not None
+    assert max(model_fit.outline_offset(CAM, R, sphere.c, c)) < 1.5
