@@ -476,16 +476,19 @@ def _confirmed(img, camera, radius, candidate, least):
     Return the sphere a candidate's rays confirm (search.confirm), or None.
 
     A sphere under MIN_SCORE is confirmed again from where it lies (its centre and apparent
-    radius): rays from a candidate's centre a few pixels off meet the outline aslant and take
-    other steps too (a ball on a checkerboard of the list kept out of the benchmark, seed 29:
-    0.40 of the rays from an open disc 8 px off, 0.82 from the sphere they found). None unless
+    radius), and replaced if that reaches MIN_SCORE: rays from a candidate's centre a few pixels
+    off meet the outline aslant and take other steps too (a ball on a checkerboard of the list
+    kept out of the benchmark, seed 29: 0.40 of the rays from an open disc 8 px off, 0.82 from
+    the sphere they found; two more balls of that list were found only from spheres under
+    HALF_LIT_SCORE). A weaker one is left as it was: a half-lit
+    sphere that grew could take a ball inside it for a mark on it (_marks_replaced). None unless
     ``least`` of the rays or more agree on it and it lies in front, within RANGE.
     """
     sphere = search.confirm(img, camera, radius, candidate)
     if sphere is not None and sphere.score < MIN_SCORE and sphere.c[2] > radius:
         again = search.confirm(img, camera, radius, search.Candidate(
             camera.project(sphere.c), camera.apparent_radius(sphere.c, radius), 1.0))
-        if again is not None and again.score > sphere.score:
+        if again is not None and again.score >= MIN_SCORE:
             sphere = again
     if (sphere is None or sphere.score < least or not sphere.c[2] > radius
             or not RANGE[0] <= np.linalg.norm(sphere.c) <= RANGE[1]):
@@ -497,15 +500,18 @@ def _marks_replaced(camera, R, spheres, half_lit):
     """
     Return ``spheres`` with those that are marks on a half-lit ball replaced by that ball.
 
-    Without any sphere, the half-lit ones, best first: a ball alone whose shadowed half is lost
-    in its background (the model fit's checks then tell it from a pattern).
+    Not by one that is the same blob as a sphere left (_same_ball): that sphere, confirmed by
+    more rays, is the blob's reading. Without any sphere, the half-lit ones, best first: a ball
+    alone whose shadowed half is lost in its background (the model fit's checks then tell it
+    from a pattern).
     """
     half_lit = sorted(half_lit, key=lambda s: -s.score)
     if not spheres:
         return half_lit
     for ball in half_lit:
         kept = [s for s in spheres if not _on_ball(camera, s.c, ball.c, R)]
-        if len(kept) < len(spheres):
+        if (len(kept) < len(spheres)
+                and not any(_same_ball(camera, s.c, ball.c, R) for s in kept)):
             spheres = kept + [ball]
     return spheres
 
