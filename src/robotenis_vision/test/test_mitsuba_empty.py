@@ -8,30 +8,24 @@ with the ball must still be measured on the ball.
 """
 import os
 
-import cv2
+import mitsuba_data
 import numpy as np
 import pytest
-from robotenis_vision import camera, detector
-import yaml
+from robotenis_vision import detector
 
 DATA = os.path.join(os.path.dirname(__file__), 'data', 'mitsuba-empty')
 R = 0.019                       # m: the paper's ball radius R_B
 
 
 def entries():
-    with open(os.path.join(DATA, 'index.yaml')) as f:
-        return yaml.safe_load(f)['images']
+    return mitsuba_data.index(DATA)
 
 
 def load(entry):
     """Return the truth, the camera, the frame with the ball and the frame without it."""
-    with open(os.path.join(DATA, f"{entry['id']}.yaml")) as f:
-        truth = yaml.safe_load(f)
-    cam = camera.Camera(np.array(truth['K']), np.array(truth['D']), truth['width'],
-                        truth['height'], 'mitsuba')
-    ball, empty = (cv2.imread(os.path.join(DATA, name), cv2.IMREAD_UNCHANGED)
-                   for name in (truth['image'], entry['empty']))
-    return truth, cam, ball, empty
+    truth, cam = mitsuba_data.truth_and_camera(DATA, entry['id'])
+    return (truth, cam, mitsuba_data.image(DATA, truth['image']),
+            mitsuba_data.image(DATA, entry['empty']))
 
 
 def test_most_checkerboards_without_the_ball_are_refused_as_patterns():

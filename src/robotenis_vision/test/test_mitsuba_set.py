@@ -10,12 +10,11 @@ range along the line of sight, 0.01 % across it) plus three standard errors of t
 """
 import os
 
-import cv2
+import mitsuba_data
 import numpy as np
 import pytest
-from robotenis_vision import camera, detector, model_fit
+from robotenis_vision import detector, model_fit
 from scipy.stats import chi2
-import yaml
 
 DATA = os.path.join(os.path.dirname(__file__), 'data', 'mitsuba')
 R = 0.019                       # m: the paper's ball radius R_B
@@ -23,22 +22,18 @@ DEPTH_BIAS, LATERAL_BIAS = 5e-4, 1e-4       # of the range: issue 13's targets
 
 
 def index():
-    with open(os.path.join(DATA, 'index.yaml')) as f:
-        return yaml.safe_load(f)['images']
+    return mitsuba_data.index(DATA)
 
 
 def load(entry):
     """Return the truth, the camera, the first image and its repeated frames (whole images)."""
-    with open(os.path.join(DATA, f"{entry['id']}.yaml")) as f:
-        truth = yaml.safe_load(f)
-    cam = camera.Camera(np.array(truth['K']), np.array(truth['D']), truth['width'],
-                        truth['height'], 'mitsuba')
-    image = cv2.imread(os.path.join(DATA, truth['image']), cv2.IMREAD_UNCHANGED)
+    truth, cam = mitsuba_data.truth_and_camera(DATA, entry['id'])
+    image = mitsuba_data.image(DATA, truth['image'])
     x0, y0, w, h = truth['renderer']['window']
     frames = [image]
     for name in entry['repeats']:
         frame = image.copy()
-        frame[y0:y0 + h, x0:x0 + w] = cv2.imread(os.path.join(DATA, name), cv2.IMREAD_UNCHANGED)
+        frame[y0:y0 + h, x0:x0 + w] = mitsuba_data.image(DATA, name)
         frames.append(frame)
     return truth, cam, frames
 
