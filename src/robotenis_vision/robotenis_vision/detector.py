@@ -81,15 +81,15 @@ MIN_ROUND_SHARE = 0.2
 # a ball round over no more of its outline than a circle inscribed in a checkerboard's square or
 # a texture's blob shows, and whose limb varies more than MAX_LIMB_VARIATION, is a pattern too:
 # the balls the model fit reported on the textured backgrounds without a ball (both renderers,
-# the benchmark's list and a list kept out of it, seed 29) were round over 0.20-0.35, those with
-# a rough limb 0.36-1.23; of the balls of those lists' frames, those round under 0.35 had a limb
-# under 0.25 where they were measured within 1 % of the range (scene 061 of the benchmark's
-# Mitsuba list, a fit 1.2 px outside the ball: 0.51, 6.9 % too near)
+# the benchmark's list and a list kept out of it, seed 29) were round over 0.20-0.35; of the
+# balls of those lists' frames, those round under 0.35 had a limb under 0.25, except wrong balls
+# (0.24-0.97) and a fit 1.2 px outside the ball (the benchmark's Mitsuba scene 061: 0.51, 6.9 % of
+# the range too near)
 PATTERN_SHARE = 0.35
 # or whose edge turns with its outline over less than this share of its strength (_turning): a
-# square's side is straight. On the list kept out of the benchmark (seed 29), the squares and
-# the wrong balls round under PATTERN_SHARE turned over 0.14-0.21 of it, the balls round under 0.4
-# over 0.25 and more (the one under 0.3 read 0.3 % of the range off)
+# square's side is straight. On the list kept out of the benchmark (seed 29), of the spheres round
+# under PATTERN_SHARE, the squares and a wrong ball turned over 0.13-0.27 of it (Mitsuba) and
+# 0.19 (the project's renderer), the balls over 0.60 and more
 MIN_TURNING = 0.3
 TURNING_SECTORS = 16           # _turning: the outline's sectors, each an edge direction's fit
 # _turning: px, the image smoothed before its gradient's direction is read: on a sharp edge (a
@@ -480,9 +480,8 @@ def _confirmed(img, camera, radius, candidate, least):
     off meet the outline aslant and take other steps too (a ball on a checkerboard of the list
     kept out of the benchmark, seed 29: 0.40 of the rays from an open disc 8 px off, 0.82 from
     the sphere they found; two more balls of that list were found only from spheres under
-    HALF_LIT_SCORE). A weaker one is left as it was: a half-lit
-    sphere that grew could take a ball inside it for a mark on it (_marks_replaced). None unless
-    ``least`` of the rays or more agree on it and it lies in front, within RANGE.
+    HALF_LIT_SCORE); a weaker one is left as it was. None unless ``least`` of the rays or more
+    agree on it and it lies in front, within RANGE.
     """
     sphere = search.confirm(img, camera, radius, candidate)
     if sphere is not None and sphere.score < MIN_SCORE and sphere.c[2] > radius:
