@@ -780,8 +780,7 @@ def _turning(img, camera, radius, c):
     at = camera.distort_pixels((pts[:, None, :] + s[:, None] * normals[:, None, :]).reshape(-1, 2))
     x0, y0 = np.maximum(np.floor(at.min(axis=0)).astype(int) - 4, 0)
     x1, y1 = np.ceil(at.max(axis=0)).astype(int) + 5
-    smooth = cv2.GaussianBlur(np.ascontiguousarray(img[y0:y1, x0:x1]), (0, 0), TURNING_BLUR)
-    gx, gy = (cv2.Sobel(smooth, cv2.CV_32F, dx, 1 - dx, ksize=3) for dx in (1, 0))
+    gx, gy = search.gradients(np.ascontiguousarray(img[y0:y1, x0:x1]), TURNING_BLUR)
     mx, my = (at - (x0, y0)).astype(np.float32).T.reshape(2, len(pts), len(s))
     g = [cv2.remap(d, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
          for d in (gx, gy)]

@@ -163,9 +163,9 @@ def _rays():
     return np.stack([np.cos(phi), np.sin(phi)], axis=1)
 
 
-def gradients(image):
-    """Return the image's gradient (gx, gy), grey levels per px, lightly smoothed (float32)."""
-    smooth = cv2.GaussianBlur(image, (0, 0), 0.7)
+def gradients(image, sigma=0.7):
+    """Return the image's gradient (gx, gy), grey levels per px, smoothed by sigma px (float32)."""
+    smooth = cv2.GaussianBlur(image, (0, 0), sigma)
     return (cv2.Sobel(smooth, cv2.CV_32F, 1, 0, ksize=3) / 8,
             cv2.Sobel(smooth, cv2.CV_32F, 0, 1, ksize=3) / 8)
 
