@@ -8,14 +8,13 @@ all 20 empty boards: the circle inscribed in a square, fitted by the model as a 
 it, 17 of 20 were refused: the small squares it let through show their edges on one circle over
 a third of it or more (a small blurred square is rounder than a big one). Their sides are
 straight: with PATTERN_SHARE and MIN_TURNING, 20 of 20. The checks lower false balls on
-textures; benchmarks/vision.py counts those they leave.
+textures; benchmarks/vision.py counts those they leave. The straight-sides feature alone is
+tested in test_search.py.
 """
-import cv2
 import numpy as np
 import pytest
 from robotenis_sim import camera_model as cm
 from robotenis_vision import camera, detector
-import simple_render
 
 R = 0.019
 CAM = camera.default()
@@ -59,22 +58,3 @@ def test_the_ball_over_the_same_boards_is_measured(square):
         det = detector.detect(render(BALL, square, seed), CAM, R)
         # the model fit's own covariance is far smaller; this only says it is the ball
         assert np.linalg.norm(det.position - BALL) < 0.1 * R, det.position
-
-
-def test_a_squares_sides_do_not_turn_with_its_inscribed_circle():
-    """
-    Tell a ball's edge from a square's sides by how they turn along the outline (_turning).
-
-    The ball drawn by the tests' own renderer turns with its outline all round; a square whose
-    sides touch the same outline (its inscribed circle) does not, however sharp its edges.
-    """
-    rng = np.random.default_rng(5)
-    c = np.array([0.0, 0.0, 0.3])
-    disc = simple_render.render(CAM, c, R, rng, ball=170.0, background=60.0, noise_sigma=2.0)
-    centre, r = CAM.project(c), CAM.apparent_radius(c, R)
-    v, u = np.mgrid[0:CAM.height, 0:CAM.width]
-    inside = (np.abs(u - centre[0]) < r) & (np.abs(v - centre[1]) < r)
-    square = cv2.GaussianBlur(np.where(inside, 170.0, 60.0), (0, 0), 0.8)
-    square = square + 2.0 * rng.standard_normal(square.shape)
-    assert detector._turning(disc.astype(np.float32), CAM, R, c) > 0.9
-    assert detector._turning(square.astype(np.float32), CAM, R, c) < detector.MIN_TURNING

@@ -132,6 +132,22 @@ def test_a_square_meets_its_inscribed_circle_on_a_short_arc_and_a_ball_all_round
     assert detector.round_arc(ball.astype(np.float32), CAM, R, C) > 2 * inscribed
 
 
+def test_a_squares_sides_do_not_turn_with_its_inscribed_circle():
+    """
+    Tell a ball's edge from a square's sides by how they turn along the outline (_turning).
+
+    The ball drawn by the tests' own renderer turns with its outline all round; a square whose
+    sides touch the same outline (its inscribed circle) does not, however sharp its edges.
+    """
+    rng = np.random.default_rng(5)
+    c = np.array([0.0, 0.0, 0.3])
+    disc = simple_render.render(CAM, c, R, rng, ball=170.0, background=60.0, noise_sigma=2.0)
+    square = blob(disc.shape, CAM.project(c), CAM.apparent_radius(c, R), square=True,
+                  level=170.0) + 2.0 * rng.standard_normal(disc.shape)
+    assert detector._turning(disc.astype(np.float32), CAM, R, c) > 0.9
+    assert detector._turning(square.astype(np.float32), CAM, R, c) < detector.MIN_TURNING
+
+
 def test_a_weak_sphere_is_confirmed_again_from_where_it_lies():
     """
     A candidate a fifth of the radius off: its rays meet the outline aslant, under MIN_SCORE.
