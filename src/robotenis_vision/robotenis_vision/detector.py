@@ -21,8 +21,9 @@ candidates, the steep points of rays from each must agree on one sphere of the k
 checkerboard's square meets its inscribed circle only near four points) are measured; each must
 show its edge around MIN_ARC of its outline, and on one ellipse over MIN_ROUND_SHARE of it (a
 texture's round blob does not), or over PATTERN_SHARE if its limb is rough or its edge straight
-(_pattern); a sphere seen on a bigger ball's disc is a mark on it (_on_ball), not a ball. The
-balls measured are ranked by the round arc of their measured outline (a search's sphere a few
+(_pattern); a sphere seen on a bigger ball's disc is a mark on it (_on_ball), not a ball, and
+one whose outline runs hidden behind another's disc lies behind it (_in_front: a ball's
+shadow). The balls measured are ranked by the round arc of their measured outline (a search's sphere a few
 pixels off shows none) times the model fit's clarity. Two balls measured in the image, each clear
 to the model fit (its edge around the outline, its pixels kept: SECOND_BALL), alike (contrast and
 blur: _alike) and round alike (SECOND_ROUND), make it ambiguous: it is refused (DetectionError),
@@ -115,6 +116,11 @@ NEAR = 0.5                     # of its apparent radius: how far _near finds a b
 TRACK_GAP = 0.05               # s: detections further apart give no velocity to move a prior by
 TRACK_MIN_SHIFT = 0.5          # px: a prior predicted to move less stays where it was
 ROUND_FLOOR_PX = 0.1           # round_arc: the profile edge's own bias on a shaded ball, px
+# _hidden: of the profiles where a ball's outline crosses another's disc that must find its edge
+# for it to be in front; behind (a ball's shadow on a near background, as Mitsuba casts it, is
+# as round and as big as the ball) it shows none there: the ball in front is smooth there
+HIDDEN = 0.5
+HIDDEN_MARGIN_PX = 3.0         # _hidden: how far inside the other's outline a profile must lie
 
 
 def check_image(image, camera):
@@ -183,6 +189,8 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=
         if failures:
             raise DetectionError(failures[0])
         raise DetectionError('no sphere: no round outline of a plausible size in the image')
+    if len(found) > 1 and method != 'baseline':
+        found = _in_front(img, camera, radius, found)
     shares = [_round_on(img, camera, radius, d.position) for d, _ in found]
     # not the baseline's: its outline, a threshold's, lies pixels off the ball's edge, where no
     # profile finds it (so checked, it refused 47 % of benchmarks/vision.py's frames, from 16 %)
@@ -311,6 +319,55 @@ def _told(img, camera, radius, found, shares):
                              'the image has edges elsewhere: a blob of the background, not told '
                              'from a ball')
     return ([f for f, k in zip(found, kept) if k], [s for s, k in zip(shares, kept) if k])
+
+
+def _in_front(img, camera, radius, found):
+    """
+    Return the found balls (det, c) less those whose outline is hidden behind another's disc.
+
+    Two discs that overlap, neither within the other: the one in front shows its edge where its
+    outline crosses the other's disc, the one behind does not (_hidden). A ball hides what lies
+    behind it, so the one behind is not a whole ball in view: a ball's own shadow on a close
+    background (the benchmark's Mitsuba scenes cast it; a light beside the camera does), or a
+    ball partly hidden, whose outline could not be measured whole.
+    """
+    seen = [_edge_seen(img, camera, radius, d.position) for d, _ in found]
+    behind = [any(k != j and _hidden(camera, radius, found[k][0].position, seen[k],
+                                     found[j][0].position, seen[j])
+                  for j in range(len(found))) for k in range(len(found))]
+    return [f for f, b in zip(found, behind) if not b] or found
+
+
+def _edge_seen(img, camera, radius, c):
+    """Return sphere c's outline (ideal px) and whether each profile finds its edge there."""
+    pts, normals, kappa = ellipse_points(camera, c, radius)
+    fit, _ = edges.profile_edges(img, pts, normals, kappa, _window(camera, c, radius, BLUR_GUESS),
+                                 BLUR_GUESS, camera.distort_pixels, refit_blur=True)
+    return pts, fit.ok & (np.abs(fit.e) < 3 * fit.sigma_e + 1.0)
+
+
+def _hidden(camera, radius, a, seen_a, b, seen_b):
+    """
+    Return whether sphere a's outline is hidden behind sphere b's disc (a, b in m).
+
+    ``seen_a``, ``seen_b``: _edge_seen's outline points and edges. Where a's outline runs
+    HIDDEN_MARGIN_PX or more inside b's, under HIDDEN of its profiles find its edge, and where
+    b's runs inside a's, HIDDEN or more of b's do: b is in front there. Each over MIN_EDGE_POINTS
+    / 2 profiles at least, or it cannot tell.
+    """
+    inside = [_within_outline(camera, radius, other, pts)
+              for other, (pts, _) in ((b, seen_a), (a, seen_b))]
+    if min(k.sum() for k in inside) < MIN_EDGE_POINTS // 2:
+        return False
+    return bool(seen_a[1][inside[0]].mean() < HIDDEN <= seen_b[1][inside[1]].mean())
+
+
+def _within_outline(camera, radius, c, pts):
+    """Return which ideal pixels lie HIDDEN_MARGIN_PX or more inside sphere c's outline."""
+    shrunk = radius * max(1.0 - HIDDEN_MARGIN_PX / camera.apparent_radius(c, radius), 0.0)
+    rays = np.column_stack([pts, np.ones(len(pts))]) @ np.linalg.inv(camera.K).T
+    cone = np.einsum('ni,ij,nj->n', rays, conic.sphere_conic(c, shrunk), rays)
+    return (cone > 0) & (rays @ c > 0)
 
 
 def _pattern(img, camera, radius, det, share):
