@@ -592,8 +592,9 @@ def rest_pair(c, kw, rng, frames, averaged):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     parser.add_argument('--seed', type=int, default=SEED,
-                        help=f'seed of the scene list (default {SEED}, the benchmark list; another '
-                        'draws a list the detector was never judged on, rendered on first use)')
+                        help=f'seed of the scene list (default {SEED}, the benchmark list; '
+                        'another draws a list the detector was never judged on, rendered on first '
+                        'use)')
     parser.add_argument('--scenes', type=int, default=SCENES,
                         help=f'scenes in the list (default {SCENES})')
     args = parser.parse_args(argv)

@@ -21,13 +21,13 @@ candidates, the steep points of rays from each must agree on one sphere of the k
 checkerboard's square meets its inscribed circle only near four points) are measured; each must
 show its edge around MIN_ARC of its outline, and on one ellipse over MIN_ROUND_SHARE of it (a
 texture's round blob does not), or over PATTERN_SHARE if its limb is rough or its edge straight
-(_pattern); a sphere seen on a bigger ball's disc is a mark on it (_on_ball), not a ball, and
-one whose outline runs hidden behind another's disc lies behind it (_in_front: a ball's
-shadow). The balls measured are ranked by the round arc of their measured outline (a search's
-sphere a few pixels off shows none) times the model fit's clarity. Two balls measured in the image, each clear
+(_pattern); a sphere seen on a bigger ball's disc is a mark on it (_on_ball), not a ball, and one
+whose outline runs hidden behind another's disc lies behind it (_in_front: a ball's shadow). The
+balls measured are ranked by the round arc of their measured outline (a search's sphere a few
+pixels off shows none) times the model fit's clarity. Two balls measured in the image, each clear
 to the model fit (its edge around the outline, its pixels kept: SECOND_BALL), alike (contrast and
-blur: _alike) and round alike (SECOND_ROUND), make it ambiguous: it is refused (DetectionError),
-by every method. With a prior (the previous frame's Detection), the outline is
+blur: _alike) and round alike (SECOND_ROUND), make it ambiguous: it is refused (DetectionError), by
+every method. With a prior (the previous frame's Detection), the outline is
 measured where it was, and the search runs only if it is not found there.
 
 The outline is measured in ideal (undistorted) pixels, K [x, y, 1] for the ray (x, y, 1): there the
