@@ -531,7 +531,8 @@ def at_rest(scenes, n_scenes=8, rests=2, settle=36, averaged=30, far=0.45):
         for _ in range(rests):
             row = rest_pair(c, kw, rng, settle + averaged, averaged)
             if row is None:
-                print(f'   {k:5d}  {np.linalg.norm(c):.3f} | a frame refused: rest left out')
+                print(f'   {k:5d}  {np.linalg.norm(c):.3f} | refused (a frame by the conic, or '
+                      'the rest by the model fit): left out')
                 continue
             rows.append(row)
             print(f'   {k:5d}  {np.linalg.norm(c):.3f} | {row[0] * 1e3:19.0f} {row[1]:+6.3f} '
@@ -548,7 +549,7 @@ def at_rest(scenes, n_scenes=8, rests=2, settle=36, averaged=30, far=0.45):
 
 def rest_pair(c, kw, rng, frames, averaged):
     """
-    Measure one rest both ways; None if the conic refuses a frame.
+    Measure one rest both ways; None if the conic refuses a frame or the model the rest.
 
     RestCorrection with the model fit on every frame at rest, and on mean images. Returns, for
     each way, the model fits' CPU (s) and the depth and lateral error (mm) of the last
@@ -578,9 +579,11 @@ def rest_pair(c, kw, rng, frames, averaged):
         prior = fast
         for k, way in enumerate(ways):
             det, _ = way.update(image, fast, CAM.project(fast.position))
-            if way.switch.still >= way.switch.frames:    # at rest: what the node publishes
-                measured[k].append(det.position)
+            if way.switch.still >= way.switch.frames and det is not None:   # what the node
+                measured[k].append(det.position)                          # publishes at rest
                 corrected[k] += det is not fast
+    if not all(len(P) >= averaged for P in measured):
+        return None
     errors = []
     for P in measured:
         along, across = split(np.mean(P[-averaged:], axis=0) - c, c)

@@ -152,7 +152,11 @@ class RestCorrection:
 
         And the accurate method's failure on this frame (a message) or None. The accurate method
         starts from its own last detection while the ball stays still, else from det; if it fails
-        the last correction stays, and before any, det is returned.
+        the last correction stays, and before any, None is returned with the reason: at rest the
+        ball is the accurate method's, and a ball it refuses is not trusted (the fast method's
+        cold search can take a pattern for the ball and follow it: on a list kept out of
+        benchmarks/vision.py, seed 37, a rest whose every fit refused the conic's ball would have
+        published it, 0.4 m off, for the whole rest).
         """
         if not self.switch.update(px):
             self.mean.reset()
@@ -164,7 +168,7 @@ class RestCorrection:
                 return self.last, None
             except DetectionError as e:
                 self.last = None
-                return det, f'at rest: {e}'
+                return None, f'at rest: {e}'
         failure = None
         if self.mean.add(image, det.position, px):
             try:
@@ -174,5 +178,6 @@ class RestCorrection:
                 self.last, failure = None, f'on the mean of {self.mean.n} frames at rest: {e}'
         position = self.mean.corrected(det.position)
         if position is None:
-            return det, failure
+            return None, failure or (f'at rest: no {self.label} correction yet (its fit on the '
+                                     'first frame failed)')
         return replace(det, position=position, method=f'{det.method}+{self.label} mean'), failure

@@ -162,6 +162,9 @@ class SphereDetectorNode(Node):
             self.track = track[-1:] + ((t, det),)
         if self.rest:
             det, failure = self.rest.update(image, det, self.camera.project(det.position))
+            if det is None:
+                self.drop(f'{self.rest_method} {failure}')
+                return
             if failure:
                 self.get_logger().info(f'{self.rest_method} {failure}', throttle_duration_sec=5.0)
         if np.isfinite(det.fit_rms_px) and det.fit_rms_px > self.max_rms:

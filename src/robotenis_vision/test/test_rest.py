@@ -140,3 +140,24 @@ def test_every_frame_at_rest_publishes_the_accurate_method_on_the_frame_itself()
     assert out[0] is fast and [m.method for m in out[1:]] == ['model'] * 3
     # each frame's own image, seeded by the frame before's fit (the first by the fast one)
     assert [v for v, _ in seen] == [1, 2, 3] and seen[0][1] is fast and seen[1][1] is out[1]
+
+
+def test_a_ball_the_accurate_method_refuses_at_rest_is_not_published():
+    """While moving the fast detection is published; at rest, none without a correction."""
+    def accurate(image, seed):
+        raise detector.DetectionError('misfit')
+
+    fast = detector.Detection(np.array([0.0, 0.0, 0.3]), np.eye(3) * 1e-10, np.zeros((0, 2)),
+                              0.1, 'conic')
+    image = np.zeros((4, 5), np.uint8)
+    for every_frame in (False, True):
+        rest = RestCorrection(0.3, 1, accurate, 'model', every_frame=every_frame)
+        out = [rest.update(image, fast, (320.0, 240.0)) for _ in range(3)]
+        assert out[0] == (fast, None)                         # not yet still
+        assert all(det is None for det, _ in out[1:])
+        if every_frame:
+            assert [why for _, why in out[1:]] == ['at rest: misfit'] * 2
+        else:
+            assert out[1][1] == 'on the mean of 1 frames at rest: misfit'
+            assert out[2][1] == 'at rest: no model correction yet (its fit on the first frame ' \
+                                'failed)'
