@@ -16,8 +16,9 @@ ball has stood still in the image (its centre moved less than ``rest_motion_px``
 ``rest_frames`` frames: the robot at rest) ``rest_method`` (default 'model', the accurate fit,
 about 15-40 ms a fit) runs on the mean image of the frames at rest on the first and when their
 number reaches 8, 16, 32, ... (robotenis_vision.rest), and every frame's fast detection is
-published corrected by it (method 'conic+model mean'); while the ball moves the fast one is
-(figures: ``./robotenis bench vision``). Parameters: the table PARAMETERS.
+published corrected by it (method 'conic+model mean'), or dropped while it has no correction (the
+accurate fit refused that ball); while the ball moves the fast one is (figures: ``./robotenis
+bench vision``). Parameters: the table PARAMETERS.
 """
 import sys
 
