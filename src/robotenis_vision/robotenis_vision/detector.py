@@ -332,11 +332,19 @@ def _in_front(img, camera, radius, found):
     background (the benchmark's Mitsuba scenes cast it; a light beside the camera does), or a
     ball partly hidden, whose outline could not be measured whole.
     """
-    seen = [_edge_seen(img, camera, radius, d.position) for d, _ in found]
-    behind = [any(k != j and _hidden(camera, radius, found[k][0].position, seen[k],
-                                     found[j][0].position, seen[j])
-                  for j in range(len(found))) for k in range(len(found))]
-    return [f for f, b in zip(found, behind) if not b] or found
+    c = [d.position for d, _ in found]
+    pairs = [(k, j) for k in range(len(c)) for j in range(len(c))
+             if k != j and _overlap(camera, radius, c[k], c[j])]
+    seen = {k: _edge_seen(img, camera, radius, c[k]) for k in {k for pair in pairs for k in pair}}
+    behind = {k for k, j in pairs if _hidden(camera, radius, c[k], seen[k], c[j], seen[j])}
+    return [f for k, f in enumerate(found) if k not in behind] or found
+
+
+def _overlap(camera, radius, a, b):
+    """Return whether the discs of spheres a and b (m) overlap, neither within the other."""
+    pa, pb = camera.project(a), camera.project(b)
+    ra, rb = camera.apparent_radius(a, radius), camera.apparent_radius(b, radius)
+    return abs(ra - rb) < np.linalg.norm(pa - pb) < ra + rb
 
 
 def _edge_seen(img, camera, radius, c):
