@@ -20,15 +20,16 @@ candidates, the steep points of rays from each must agree on one sphere of the k
 (RANSAC); the spheres whose outline shows the longest arc of edge on one ellipse (round_arc: a
 checkerboard's square meets its inscribed circle only near four points) are measured; each must
 show its edge around MIN_ARC of its outline, and on one ellipse over MIN_ROUND_SHARE of it (a
-texture's round blob does not), or over PATTERN_SHARE if its limb is rough or its edge straight
-(_pattern); a sphere seen on a bigger ball's disc is a mark on it (_on_ball), not a ball, and one
-whose outline runs hidden behind another's disc lies behind it (_in_front: a ball's shadow). The
-balls measured are ranked by the round arc of their measured outline (a search's sphere a few
-pixels off shows none) times the model fit's clarity. Two balls measured in the image, each clear
-to the model fit (its edge around the outline, its pixels kept: SECOND_BALL), alike (contrast and
-blur: _alike) and round alike (SECOND_ROUND), make it ambiguous: it is refused (DetectionError), by
-every method. With a prior (the previous frame's Detection), the outline is
-measured where it was, and the search runs only if it is not found there.
+texture's round blob does not), or over PATTERN_SHARE if its limb is rough or its edge straight or,
+measured by an outline method, the model fit refuses it (_pattern); a sphere seen on a bigger
+ball's disc is a mark on it (_on_ball), not a ball, and one whose outline runs hidden behind
+another's disc lies behind it (_in_front: a ball's shadow). The balls measured are ranked by the
+round arc of their measured outline (a search's sphere a few pixels off shows none) times the model
+fit's clarity. Two balls measured in the image, each clear to the model fit (its edge around the
+outline, its pixels kept: SECOND_BALL), alike (contrast and blur: _alike) and round alike
+(SECOND_ROUND), make it ambiguous: it is refused (DetectionError), by every method. With a prior
+(the previous frame's Detection), the outline is measured where it was, and the search runs only if
+it is not found there.
 
 The outline is measured in ideal (undistorted) pixels, K [x, y, 1] for the ray (x, y, 1): there the
 sphere's outline is exactly an ellipse. Frames that cannot be trusted raise DetectionError with
@@ -330,13 +331,16 @@ def _in_front(img, camera, radius, found):
     outline crosses the other's disc, the one behind does not (_hidden). A ball hides what lies
     behind it, so the one behind is not a whole ball in view: a ball's own shadow on a close
     background (the benchmark's Mitsuba scenes cast it; a light beside the camera does), or a
-    ball partly hidden, whose outline could not be measured whole.
+    ball partly hidden, whose outline could not be measured whole: two balls that overlap so
+    are not refused as ambiguous, the one in front is measured. Before _told and _pattern: a
+    disc they would refuse can still hide another.
     """
     c = [d.position for d, _ in found]
     pairs = [(k, j) for k in range(len(c)) for j in range(len(c))
              if k != j and _overlap(camera, radius, c[k], c[j])]
     seen = {k: _edge_seen(img, camera, radius, c[k]) for k in {k for pair in pairs for k in pair}}
-    behind = {k for k, j in pairs if _hidden(camera, radius, c[k], seen[k], c[j], seen[j])}
+    behind = {k for k, j in pairs if seen[k] and seen[j]
+              and _hidden(camera, radius, c[k], seen[k], c[j], seen[j])}
     return [f for k, f in enumerate(found) if k not in behind] or found
 
 
@@ -348,8 +352,11 @@ def _overlap(camera, radius, a, b):
 
 
 def _edge_seen(img, camera, radius, c):
-    """Return sphere c's outline (ideal px) and whether each profile finds its edge there."""
-    pts, normals, kappa = ellipse_points(camera, c, radius)
+    """Return sphere c's outline (ideal px) and whether each profile finds its edge; () if none."""
+    try:
+        pts, normals, kappa = ellipse_points(camera, c, radius)
+    except DetectionError:
+        return ()
     fit, _ = edges.profile_edges(img, pts, normals, kappa, _window(camera, c, radius, BLUR_GUESS),
                                  BLUR_GUESS, camera.distort_pixels, refit_blur=True)
     return pts, fit.ok & (np.abs(fit.e) < 3 * fit.sigma_e + 1.0)
@@ -372,7 +379,12 @@ def _hidden(camera, radius, a, seen_a, b, seen_b):
 
 
 def _within_outline(camera, radius, c, pts):
-    """Return which ideal pixels lie HIDDEN_MARGIN_PX or more inside sphere c's outline."""
+    """
+    Return which ideal pixels lie about HIDDEN_MARGIN_PX or more inside sphere c's outline.
+
+    Inside the outline of the sphere shrunk by that margin over its apparent radius on the axis:
+    off the axis the outline is an ellipse larger than that, and the margin up to twice as wide.
+    """
     shrunk = radius * max(1.0 - HIDDEN_MARGIN_PX / camera.apparent_radius(c, radius), 0.0)
     rays = np.column_stack([pts, np.ones(len(pts))]) @ np.linalg.inv(camera.K).T
     cone = np.einsum('ni,ij,nj->n', rays, conic.sphere_conic(c, shrunk), rays)
@@ -446,7 +458,7 @@ def _model_view(img, camera, radius, det, c, gamma):
     """
     Return the model fit's Detection of a found ball, or None if it fails.
 
-    A detection by another method is fitted again from the search's sphere c (m).
+    A detection by another method is fitted again from sphere c (m): the search's, or its own.
     """
     if det.method == 'model':
         return det

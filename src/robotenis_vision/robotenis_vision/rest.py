@@ -150,9 +150,11 @@ class RestCorrection:
         """
         Return the Detection to publish for a frame and its fast Detection det (px: its centre).
 
-        And the accurate method's failure on this frame (a message) or None. The accurate method
-        starts from its own last detection while the ball stays still, else from det; if it fails
-        the last correction stays, and before any, None is returned with the reason: at rest the
+        Or None: the frame is dropped. And the accurate method's failure on this frame (a message)
+        or None. The accurate method starts from its own last detection while the ball stays
+        still, else from det. On mean images, if it fails the last correction stays; every frame
+        (``every_frame``), its failure drops that frame. Before any correction, None is returned
+        with the reason: at the
         ball is the accurate method's, and a ball it refuses is not trusted (the fast method's
         cold search can take a pattern for the ball and follow it: on a list kept out of
         benchmarks/vision.py, seed 37, a rest whose every fit refused the conic's ball would have
@@ -178,6 +180,6 @@ class RestCorrection:
                 self.last, failure = None, f'on the mean of {self.mean.n} frames at rest: {e}'
         position = self.mean.corrected(det.position)
         if position is None:
-            return None, failure or (f'at rest: no {self.label} correction yet (its fit on the '
-                                     'first frame failed)')
+            return None, failure or (f'at rest: no {self.label} correction yet (no fit of this '
+                                     'rest has succeeded)')
         return replace(det, position=position, method=f'{det.method}+{self.label} mean'), failure

@@ -1,5 +1,5 @@
 """
-The conic's ball judged by the model fit's limb when it is round over little of its outline.
+The conic's ball refused when round over little of its outline and the model fit refuses it.
 
 A back-lit ball over a checkerboard of 7 px squares as bright as its shaded side (a scene of a
 list kept out of benchmarks/vision.py, seed 37, rendered again by robotenis_sim's camera model):

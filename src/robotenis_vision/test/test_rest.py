@@ -159,5 +159,5 @@ def test_a_ball_the_accurate_method_refuses_at_rest_is_not_published():
             assert [why for _, why in out[1:]] == ['at rest: misfit'] * 2
         else:
             assert out[1][1] == 'on the mean of 1 frames at rest: misfit'
-            assert out[2][1] == 'at rest: no model correction yet (its fit on the first frame ' \
-                                'failed)'
+            assert out[2][1] == 'at rest: no model correction yet (no fit of this rest has ' \
+                                'succeeded)'
