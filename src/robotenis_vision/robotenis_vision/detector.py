@@ -353,13 +353,26 @@ def _overlap(camera, radius, a, b):
 
 def _edge_seen(img, camera, radius, c):
     """Return sphere c's outline (ideal px) and whether each profile finds its edge; () if none."""
+    profiled = _profiled(img, camera, radius, c)
+    if profiled is None:
+        return ()
+    pts, _, fit = profiled
+    return pts, fit.ok & (np.abs(fit.e) < 3 * fit.sigma_e + 1.0)
+
+
+def _profiled(img, camera, radius, c):
+    """
+    Return one profile pass along sphere c's outline (blur estimated): points, normals, fit.
+
+    None when c's outline cannot be laid out (ellipse_points).
+    """
     try:
         pts, normals, kappa = ellipse_points(camera, c, radius)
     except DetectionError:
-        return ()
+        return None
     fit, _ = edges.profile_edges(img, pts, normals, kappa, _window(camera, c, radius, BLUR_GUESS),
                                  BLUR_GUESS, camera.distort_pixels, refit_blur=True)
-    return pts, fit.ok & (np.abs(fit.e) < 3 * fit.sigma_e + 1.0)
+    return pts, normals, fit
 
 
 def _hidden(camera, radius, a, seen_a, b, seen_b):
@@ -831,12 +844,10 @@ def _round_on(img, camera, radius, c):
     None when they cannot tell: fewer than MIN_EDGE_POINTS profiles find an edge (a low contrast,
     a back-lit ball's edge the profiles miss), or no sphere fits them.
     """
-    try:
-        pts, normals, kappa = ellipse_points(camera, c, radius)
-    except DetectionError:
+    profiled = _profiled(img, camera, radius, c)
+    if profiled is None:
         return None
-    fit, _ = edges.profile_edges(img, pts, normals, kappa, _window(camera, c, radius, BLUR_GUESS),
-                                 BLUR_GUESS, camera.distort_pixels, refit_blur=True)
+    pts, normals, fit = profiled
     if fit.ok.sum() < MIN_EDGE_POINTS:
         return None
     xy = camera.to_normalized(pts[fit.ok] + fit.e[fit.ok, None] * normals[fit.ok])
