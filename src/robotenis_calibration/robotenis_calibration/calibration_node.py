@@ -7,13 +7,15 @@ one on goal, waits for rest and settling, and counts detections (the first pose 
 should be nearest the optical axis; with ``replan``, the default, the poses after the first rest
 are planned again around the ball it saw, and again after six), while every
 message of the session is recorded to a rosbag2 bag (MCAP, robotenis_calibration.bag_io): the
-declared description, joint states, sphere positions and detections, camera info, goals, rest
-markers, progress, and of the camera images only the first ``images_per_pose`` frames of each rest,
-as lossless PNG (sensor_msgs/CompressedImage on ``image_topic``/compressed): enough to check or
-re-run the detector on every pose, at a small share of the bag (all frames raw would be 300 kB
-each at 120 Hz). The images are subscribed only from a rest's start until its frames are kept:
-taking a 640x480 frame costs about 1.1 ms, at 100 Hz a tenth of a core, and a session keeps 2 of
-about 110 per pose (a new subscription matches the camera's publisher within about 10 ms here).
+declared description, joint states, sphere positions and detections, the detector's reasons for
+the frames it dropped (sphere/dropped: they also name why a pose was skipped), camera info,
+goals, rest markers, progress, and of the camera images only the first ``images_per_pose`` frames
+of each rest, as lossless PNG (sensor_msgs/CompressedImage on ``image_topic``/compressed):
+enough to check or re-run the detector on every pose, at a small share of the bag (all frames raw
+would be 300 kB each at 120 Hz). The images are subscribed only from a rest's start until its
+frames are kept: taking a 640x480 frame costs about 1.1 ms, at 100 Hz a tenth of a core, and a
+session keeps 2 of about 110 per pose (a new subscription matches the camera's publisher within
+about 10 ms here).
 The subscribed topics are recorded as the bytes that arrived (as ``ros2 bag record`` does;
 rclpy's own serialization of a JointState has trailing bytes that rosbags' reader refuses).
 The bag names the topics as the calibration contract does (/joint_states, /sphere/position,
@@ -59,6 +61,7 @@ RECORDED = {  # topic (relative) -> (message class, ROS type name)
     'sphere/position': (PointStamped, 'geometry_msgs/msg/PointStamped'),
     'sphere/detection': (SphereDetection, 'robotenis_interfaces/msg/SphereDetection'),
     'camera/camera_info': (CameraInfo, 'sensor_msgs/msg/CameraInfo'),
+    'sphere/dropped': (String, 'std_msgs/msg/String'),
 }
 PUBLISHED = {
     'goal': 'geometry_msgs/msg/PointStamped',
@@ -114,7 +117,8 @@ class CalibrationNode(Node):
         self.progress_pub = self.create_publisher(CalibrationProgress, 'calibration/progress', 10)
         self.rest_pub = self.create_publisher(RestMarker, 'calibration/rest', 10)
         self.description_pub = self.create_publisher(String, 'robot_description', LATCHED)
-        fed = {'joint_states': self.on_joint_states, 'sphere/detection': self.on_detection}
+        fed = {'joint_states': self.on_joint_states, 'sphere/detection': self.on_detection,
+               'sphere/dropped': self.on_dropped}
         for topic, (cls, _) in RECORDED.items():
             qos = qos_profile_sensor_data if topic.startswith('camera') else QUEUE
             callback = fed.get(topic, lambda data, t=topic: self.record(t, data, self.stamp_ns()))
@@ -156,6 +160,13 @@ class CalibrationNode(Node):
             self.runner.detection(stamp_ns * 1e-9, xyz(msg.position),
                                   np.reshape(msg.covariance, (3, 3)),
                                   stamp_seconds(msg.header.stamp))
+
+    def on_dropped(self, data):
+        """Record the detector's reason to drop a frame; tell the runner (its skip messages)."""
+        stamp_ns = self.stamp_ns()
+        self.record('sphere/dropped', data, stamp_ns)
+        if self.runner is not None:
+            self.runner.dropped(stamp_ns * 1e-9, deserialize_message(data, String).data)
 
     def watch_images(self, on):
         """Subscribe to the camera images (``on``) or stop taking them."""

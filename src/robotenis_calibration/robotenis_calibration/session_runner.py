@@ -141,6 +141,8 @@ class SessionRunner:
         self._rest = None
         self._last_detection = None       # (robot, wall) time of the rest's last detection
         self._measured = [0, 0.0]         # frames and seconds of the rests measured so far
+        self._drops = (0, None)           # frames the detector dropped in this rest, the last why
+        self._last_drop = None            # the detector's last reason for a dropped frame
 
     @property
     def fraction(self):
@@ -239,6 +241,19 @@ class SessionRunner:
             self._rest.sphere.append(np.asarray(position, dtype=float))
             self._rest.sphere_cov.append(np.asarray(covariance, dtype=float).reshape(3, 3))
 
+    def dropped(self, t, reason):
+        """Take the reason the sphere detector gave for a frame it dropped, from sphere/dropped."""
+        if not self.started:
+            return
+        self._last_drop = reason
+        if self.state == MEASURING:
+            self._drops = (self._drops[0] + 1, reason)
+
+    def _unseen(self, guess):
+        """Say why a rest lacks detections: the detector's own reason if it gave one, or guess."""
+        count, reason = self._drops
+        return guess if count == 0 else f'the detector dropped {count} frame(s): {reason}'
+
     def _heard(self, name, t):
         self.last_input[name], self._wall_input[name] = t, self._wall()
 
@@ -256,7 +271,7 @@ class SessionRunner:
                                  f'did not come to rest within {c.move_timeout:.0f} s'))
             self._next_pose(t)
         elif self.state == SETTLING and t - self._t_state >= c.settle_time:
-            self._rest = Rest(self.index, t, t)
+            self._rest, self._drops = Rest(self.index, t, t), (0, None)
             self._enter(MEASURING, t)
             self.actions.append(('rest_start', self.index))
             self.actions.append(('progress', (MEASURING, self.index, len(self.poses))))
@@ -265,22 +280,23 @@ class SessionRunner:
                 self._finish_rest(t)
             elif (not self._rest.sphere
                   and self._elapsed(t, self._t_state, self._wall_state) > c.no_ball_time):
-                self.skipped.append((self.index, f'no detection in {c.no_ball_time:.1f} s'
-                                                 ' (ball not in view?)'))
+                self.skipped.append((self.index, f'no detection in {c.no_ball_time:.1f} s '
+                                                 f'({self._unseen("ball not in view?")})'))
                 self.actions.append(('rest_end', self.index))
                 self._next_pose(t)
             elif (self._rest.sphere and self._elapsed(t, *self._last_detection)
                   > c.no_ball_time + 2 * self._frame_period()):
                 self.skipped.append((self.index,
                                      f'detections stopped after {len(self._rest.sphere)} of '
-                                     f'{c.frames_per_pose} (ball at the edge of the view?)'))
+                                     f'{c.frames_per_pose} '
+                                     f'({self._unseen("ball at the edge of the view?")})'))
                 self.actions.append(('rest_end', self.index))
                 self._next_pose(t)
             elif t - self._t_state > self._measure_limit(t):
                 self.skipped.append((self.index,
                                      f'only {len(self._rest.sphere)} of {c.frames_per_pose} '
-                                     f'detections in {t - self._t_state:.0f} s'
-                                     ' (ball not in view?)'))
+                                     f'detections in {t - self._t_state:.0f} s '
+                                     f'({self._unseen("ball not in view?")})'))
                 self.actions.append(('rest_end', self.index))
                 self._next_pose(t)
 
@@ -294,9 +310,15 @@ class SessionRunner:
             return False
         self._stop(t, '; '.join(
             f'no message on {name} for {silences[name]:.1f} s ({t - self.last_input[name]:.1f} s '
-            f'of robot time), longer than a pose can last ({limit:.1f} s): {INPUTS[name]}'
+            f'of robot time), longer than a pose can last ({limit:.1f} s): {self._source(name)}'
             for name in silent))
         return True
+
+    def _source(self, name):
+        """Say what feeds an input, and for the detections its last reason to drop a frame."""
+        if name == 'sphere/detection' and self._last_drop is not None:
+            return f'the sphere detector, which drops the frames (last: {self._last_drop})'
+        return INPUTS[name]
 
     def _stop(self, t, failure):
         """Stop the session early, saying why: a rest being measured is closed first."""

@@ -64,6 +64,36 @@ def test_a_pose_without_the_ball_is_skipped_with_a_reason():
     assert runner.fraction == 1.0
 
 
+MISFIT = 'model the ball model misfits the image (residual 9.0 times the noise)'
+
+
+def test_a_pose_whose_frames_the_detector_drops_is_skipped_with_its_reason():
+    """The detector runs but refuses pose 1's frames: the skip says so, not 'not in view'."""
+    poses = np.array([[0.1, 0, 1.0], [0.2, 0, 1.0], [0.3, 0, 1.0]])
+    runner = SessionRunner(poses, RunnerConfig(frames_per_pose=10, settle_time=0.1,
+                                               measure_timeout=1.0))
+
+    def refuse(t):
+        if runner.index == 1 and round(t * 1000) % 8 == 0:
+            runner.dropped(t, MISFIT)
+
+    drive(runner, lambda k: k != 1, on_step=refuse)
+    assert [r.index for r in runner.rests] == [0, 2]
+    index, why = runner.skipped[0]
+    # dropped at 125 Hz over the rest's no_ball_time (0.5 s): 62 or 63 frames
+    assert index == 1 and 'not in view' not in why and MISFIT in why
+    assert int(why.split('dropped ')[1].split(' ')[0]) in (62, 63)
+
+
+def test_a_detector_dropping_every_frame_stops_the_session_with_its_reason():
+    config = RunnerConfig(frames_per_pose=10, settle_time=0.1, move_timeout=2.0,
+                          measure_timeout=2.0)
+    runner = SessionRunner(np.array([[0.1 * k, 0, 1.0] for k in range(1, 40)]), config)
+    drive(runner, lambda k: True, detector_until=2.5,
+          on_step=lambda t: t >= 2.5 and runner.dropped(t, MISFIT))
+    assert 'no message on sphere/detection' in runner.failure and MISFIT in runner.failure
+
+
 def test_a_slow_camera_gets_the_time_its_frames_need():
     """
     50 frames at 5 Hz take 10 s: longer than measure_timeout, which is time beyond the frames'.

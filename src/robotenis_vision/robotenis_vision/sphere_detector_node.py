@@ -7,7 +7,9 @@ publishes sphere/position (geometry_msgs/PointStamped, optical frame, m, stamp o
 sphere/detection (robotenis_interfaces/SphereDetection: covariance, frames, edge points, fit RMS,
 method). With ``frames`` > 1 it publishes the average of every ``frames`` detections (outliers
 rejected, robotenis_vision.averaging), stamped with the last image. A frame it cannot trust is
-dropped with the reason in a rate-limited log line (two balls in view among them: ambiguous).
+dropped with the reason, published on sphere/dropped (std_msgs/String: a calibration session
+says why a pose had no detections) and in a rate-limited log line (two balls in view among them:
+ambiguous).
 
 Two methods (robotenis_vision.rest): ``method`` (default 'conic', seeded by the last frame: about
 1.5 ms a frame; a search of the whole image when the seed is lost, and while the ball stays lost
@@ -35,7 +37,7 @@ from robotenis_ros.node import declare_parameters, spin
 from robotenis_vision import averaging, camera as camera_model, detector
 from robotenis_vision.rest import RestCorrection
 from sensor_msgs.msg import CameraInfo, Image
-from std_msgs.msg import Header
+from std_msgs.msg import Header, String
 
 PARAMETERS = {
     'method': ('conic', f"on every frame: one of {', '.join(detector.METHODS)}"),
@@ -109,6 +111,7 @@ class SphereDetectorNode(Node):
         self.batch = []
         self.position_pub = self.create_publisher(PointStamped, 'sphere/position', 10)
         self.detection_pub = self.create_publisher(SphereDetection, 'sphere/detection', 10)
+        self.dropped_pub = self.create_publisher(String, 'sphere/dropped', 10)
         self.create_subscription(CameraInfo, 'camera/camera_info', self.on_camera_info,
                                  qos_profile_sensor_data)
         images = QoSProfile(history=qos_profile_sensor_data.history,
@@ -121,6 +124,8 @@ class SphereDetectorNode(Node):
                                f'{self.frames} frame(s) per measurement')
 
     def drop(self, reason):
+        """Publish why a frame gave no measurement (sphere/dropped), and log it (rate-limited)."""
+        self.dropped_pub.publish(String(data=reason))
         self.get_logger().warn(f'frame dropped: {reason}', throttle_duration_sec=2.0)
 
     def on_camera_info(self, msg):

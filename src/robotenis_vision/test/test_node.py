@@ -110,6 +110,14 @@ def test_a_lost_ball_is_searched_again_after_search_interval_of_image_time(node,
     assert len(calls) == 7
 
 
+def test_a_frame_without_a_ball_is_dropped_with_its_reason_on_sphere_dropped(node):
+    node.dropped_pub = Recorder()
+    cam = vision_camera.default()
+    feed(node, np.full((cam.height, cam.width), 80, np.uint8), 0.0)
+    assert node.position_pub.messages == [] and len(node.dropped_pub.messages) == 1
+    assert node.dropped_pub.messages[0].data.startswith('no sphere')
+
+
 def test_an_image_it_cannot_read_is_dropped_with_the_reason(node, monkeypatch):
     reasons = []
     monkeypatch.setattr(node, 'drop', reasons.append)
