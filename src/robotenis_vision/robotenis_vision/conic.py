@@ -234,13 +234,15 @@ def sphere_from_three_rays(xy1, xy2, xy3, R):
 
     The cone's axis a makes the same angle beta with the three unit rays d_i, so it is normal to
     d1 - d2 and d2 - d3; cos(beta) = a.d1 and |c| = R / sin(beta). The minimal problem for RANSAC.
+    A degenerate triple (two rays alike, or three in a plane through the camera) gives NaN.
     """
     def unit(xy):
         d = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1)
         return d / np.linalg.norm(d, axis=-1, keepdims=True)
     d1, d2, d3 = unit(xy1), unit(xy2), unit(xy3)
     a = np.cross(d1 - d2, d2 - d3)
-    a /= np.linalg.norm(a, axis=-1, keepdims=True)
+    size = np.linalg.norm(a, axis=-1, keepdims=True)
+    a = a / np.where(size > 0, size, np.nan)
     a *= np.sign(a[..., 2:3])
     cos_b = np.clip(np.sum(a * d1, axis=-1), -1.0, 1.0)
     sin_b = np.sqrt(1 - cos_b ** 2)
