@@ -90,6 +90,7 @@ def table(rows, groups, names):
 
 
 def project_study(scenes):
+    """Render each scene's variants on the project's renderer and print the table."""
     rng = np.random.default_rng(SEED_RENDER)
     names, rows, angles, defocus = None, [], [], []
     for scene in scenes:
@@ -119,6 +120,7 @@ def lamp_on_axis(scene):
 
 
 def mitsuba_study(scenes, count):
+    """Render ``count`` point-lit frontal scenes by Mitsuba, as drawn and lamp on the axis."""
     lit = [s for s in scenes if s['light']['type'] == 'point'
            and s['light'].get('direction') == 'frontal' and 10 <= light_angle(s) < 40][:count]
     print(f'\nMitsuba, {len(lit)} point-lit scenes lit from the front (10-40 deg), '
