@@ -1,4 +1,6 @@
 """The closed form from conic to sphere centre, the Taubin fit and the geometric refinement."""
+import warnings
+
 import numpy as np
 import pytest
 from robotenis_vision import conic
@@ -115,6 +117,14 @@ def test_three_touching_rays_fix_the_sphere(c):
     xy = outline_xy(c, R, 30)
     np.testing.assert_allclose(conic.sphere_from_three_rays(xy[0], xy[11], xy[23], R), c,
                                rtol=1e-9)
+
+
+def test_a_degenerate_triple_gives_nan_without_a_warning():
+    xy = outline_xy(CENTRES[0], R, 30)
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        c = conic.sphere_from_three_rays(xy[[0, 3]], xy[[0, 11]], xy[[5, 23]], R)
+    assert np.all(np.isnan(c[0])) and np.all(np.isfinite(c[1]))
 
 
 def test_ransac_ignores_points_that_caught_the_highlight():
