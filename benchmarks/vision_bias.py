@@ -46,9 +46,12 @@ MISREAD_PERCENT = 2.0
 SEED_RENDER = 5
 
 
-def light_angle(scene):
-    """Return the angle (deg) between the light and the ray from the ball to the camera."""
-    c, kw = vision.project_scene(scene)
+def light_angle(c, kw):
+    """
+    Return the angle (deg) between a scene's light and the ray from its ball c to the camera.
+
+    ``c, kw``: the scene as vision.project_scene gives it.
+    """
     return float(np.degrees(np.arccos(np.clip(np.dot(kw['lighting'].direction,
                                                      -c / np.linalg.norm(c)), -1, 1))))
 
@@ -99,7 +102,7 @@ def project_study(scenes):
         names = list(cases)
         rows.append([depth_error(cm.render(vision.CAM, c, vision.R, rng, **args), vision.CAM, c,
                                  args['gamma']) for args in cases.values()])
-        angles.append(light_angle(scene))
+        angles.append(light_angle(c, kw))
         defocus.append(kw['defocus_px'])
     rows, angles, defocus = np.array(rows), np.array(angles), np.array(defocus)
     print(f'Project renderer, {len(scenes)} scenes without noise: depth error RMS %, over the '
@@ -121,8 +124,9 @@ def lamp_on_axis(scene):
 
 def mitsuba_study(scenes, count):
     """Render ``count`` point-lit frontal scenes by Mitsuba, as drawn and lamp on the axis."""
+    angle = {s['id']: light_angle(*vision.project_scene(s)) for s in scenes}
     lit = [s for s in scenes if s['light']['type'] == 'point'
-           and s['light'].get('direction') == 'frontal' and 10 <= light_angle(s) < 40][:count]
+           and s['light'].get('direction') == 'frontal' and 10 <= angle[s['id']] < 40][:count]
     print(f'\nMitsuba, {len(lit)} point-lit scenes lit from the front (10-40 deg), '
           f'{MITSUBA_SPP} spp, no sensor noise: depth error %')
     print(f'{"scene":8s} {"angle":>6s} {"material":>9s} {"defocus":>8s} {"as drawn":>9s} '
@@ -137,7 +141,7 @@ def mitsuba_study(scenes, count):
             row.append(depth_error(image, vision.PINHOLE, np.asarray(truth['ball']['center_m']),
                                    case['exposure']['gamma']))
         errors.append(row)
-        print(f'{scene["id"]:8s} {light_angle(scene):6.1f} {scene["material"]["type"]:>9s} '
+        print(f'{scene["id"]:8s} {angle[scene["id"]]:6.1f} {scene["material"]["type"]:>9s} '
               f'{scene["blur"]["radius_px"]:8.2f} {row[0]:+9.3f} {row[1]:+13.3f}', flush=True)
     e = np.array(errors)
     print(f'{"RMS (misread/failed)":33s} {rms_cell(e[:, 0]):>15s} {rms_cell(e[:, 1]):>15s}')

@@ -154,11 +154,10 @@ class RestCorrection:
         or None. The accurate method starts from its own last detection while the ball stays
         still, else from det. On mean images, if it fails the last correction stays; every frame
         (``every_frame``), its failure drops that frame. Before any correction, None is returned
-        with the reason: at the
-        ball is the accurate method's, and a ball it refuses is not trusted (the fast method's
-        cold search can take a pattern for the ball and follow it: on a list kept out of
-        benchmarks/vision.py, seed 37, a rest whose every fit refused the conic's ball would have
-        published it, 0.4 m off, for the whole rest).
+        with the reason: at rest the ball is the accurate method's, and a ball it refuses is not
+        trusted (the fast method's cold search can take a pattern for the ball and follow it: on
+        a list kept out of benchmarks/vision.py, seed 37, a rest whose every fit refused the
+        conic's ball would have published it, 0.4 m off, for the whole rest).
         """
         if not self.switch.update(px):
             self.mean.reset()
