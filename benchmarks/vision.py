@@ -158,6 +158,7 @@ class Tally:
 
     def __init__(self):
         self.scenes, self.failed, self.frames, self.reasons, self.wrong = {}, 0, 0, {}, 0
+        self.failures = []         # (key, reason) of every failed frame
 
     def add(self, key, c, det):
         self.frames += 1
@@ -167,11 +168,17 @@ class Tally:
             det = "wrong ball: its centre's ray misses the ball"
         if isinstance(det, str):
             self.failed += 1
+            self.failures.append((key, det))
             reason = det.split(':')[0][:60]
             self.reasons[reason] = self.reasons.get(reason, 0) + 1
             return
         self.scenes.setdefault(key, (c, []))[1].append(
             (det.position - c, det.covariance, closed_form_bound(det, c)))
+
+    def commonest(self, n=3):
+        """Return the n commonest reasons of the failures, as 'count x reason; ...'."""
+        top = sorted(self.reasons.items(), key=lambda kv: -kv[1])[:n]
+        return '; '.join(f'{k} x {r}' for r, k in top)
 
 
 def wrong_ball(position, c):
@@ -213,8 +220,7 @@ def summarise(name, tallies):
               f'{t.failed}/{t.frames} ({t.wrong})')
     for method, t in tallies.items():
         if t.reasons:
-            top = sorted(t.reasons.items(), key=lambda kv: -kv[1])[:3]
-            print(f'   {method} failures: ' + '; '.join(f'{n} x {r}' for r, n in top))
+            print(f'   {method} failures: {t.commonest()}')
     return out
 
 

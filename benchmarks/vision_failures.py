@@ -52,24 +52,21 @@ def mitsuba_frames(scenes):
 def tally(name, frames, total):
     """Measure every frame by every method; print the failures; return the model's failed rate."""
     tallies = {m: vision.Tally() for m in vision.METHODS}
-    model_failed, t0 = [], time.time()
+    scenes, t0 = {}, time.time()
     for k, (scene, c, image, cam, gamma) in enumerate(frames):
+        scenes[scene['id']] = scene
         for m in vision.METHODS:
-            det = vision.attempt(image, cam, m, gamma)
-            tallies[m].add(scene['id'], c, det)
-            if m == 'model' and (isinstance(det, str) or vision.wrong_ball(det.position, c)):
-                reason = det if isinstance(det, str) else 'a wrong ball'
-                model_failed.append(f"{scene['id']} ({vision.describe(scene)}): {reason[:90]}")
+            tallies[m].add(scene['id'], c, vision.attempt(image, cam, m, gamma))
         if (k + 1) % 60 == 0:
             print(f'   ... {k + 1} of {total} frames ({time.time() - t0:.0f} s)', flush=True)
     print(f'   {name}: failed frames (of which wrong balls), of {total}')
     for m, t in tallies.items():
-        top = sorted(t.reasons.items(), key=lambda kv: -kv[1])[:3]
         print(f'   {m:9s} {t.failed:4d} ({t.wrong}) = {100 * t.failed / total:5.1f} %   '
-              + '; '.join(f'{n} x {r}' for r, n in top))
-    print(f"   the model's failed frames: {len(model_failed)}")
-    for line in model_failed:
-        print(f'      {line}')
+              f'{t.commonest()}')
+    failures = tallies['model'].failures
+    print(f"   the model's failed frames: {len(failures)}")
+    for key, reason in failures:
+        print(f'      {key} ({vision.describe(scenes[key])}): {reason[:90]}')
     return 100 * tallies['model'].failed / total
 
 
