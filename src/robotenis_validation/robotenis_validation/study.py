@@ -7,26 +7,39 @@ from robotenis_sim import camera_model, static_session
 from robotenis_sim.scenarios import BALL_GUESS_ERROR
 from robotenis_vision import camera as vision_camera
 from robotenis_vision import detector
+from robotenis_vision.plate import BackgroundPlate, NOISE_FLOOR
 
 
-def detector_bias(C, radius, method='model', camera=None, **render_options):
+def detector_bias(C, radius, method='model', camera=None, plate=True, **render_options):
     """
     Return what the detector gets wrong (K, 3), m, for balls at true centres C (K, 3, optical).
 
     Each ball is rendered by the hand camera's renderer without sensor noise (its defaults
     otherwise, or ``render_options`` of camera_model.render: a lighting, a blur) and measured: the
     error left is the detector's bias at that pose, the part that averaging frames at a rest does
-    not remove. A refused image gives a row of NaN.
+    not remove. A refused image gives a row of NaN. ``plate``: as the sphere_detector node
+    measures a session's rests (its ``background_plate``): the model method's ball is fitted
+    again from its detection with a background plate of the balls before it in C
+    (robotenis_vision.plate), each added once measured.
     """
     camera = camera or vision_camera.default()
     rng = np.random.default_rng(0)
     out = np.full((len(C), 3), np.nan)
+    behind = (BackgroundPlate((camera.height, camera.width)) if plate and method == 'model'
+              else None)
     for k, c in enumerate(np.asarray(C, dtype=float)):
         image = camera_model.render(camera, c, radius, rng, noise_sigma=0.0, **render_options)
         try:
-            out[k] = detector.detect(image, camera, radius, method).position - c
+            det = detector.detect(image, camera, radius, method)
+            if behind is not None:
+                det = detector.detect(image, camera, radius, method, det, search=False,
+                                      background=behind)
         except detector.DetectionError:
             continue
+        out[k] = det.position - c
+        if behind is not None:      # a noise-free render: its noise is the 8 bits' rounding
+            behind.add(image, camera.project(det.position),
+                       camera.apparent_radius(det.position, radius), NOISE_FLOOR)
     return out
 
 

@@ -139,7 +139,8 @@ def check_image(image, camera):
     return image.astype(np.float32)
 
 
-def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=True):
+def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=True,
+           background=None):
     """
     Measure the sphere of ``radius`` (m) in ``image`` (mono, as the camera gives it): a Detection.
 
@@ -149,6 +150,8 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=
     ``search`` is False: then the first DetectionError is
     raised (a refinement of that ball must not measure another). ``gamma``: the camera's response
     (grey = 255 (I / 255)^(1 / gamma); 1 for a linear camera), used by the model method.
+    ``background``: what lies behind the ball (``plate.BackgroundPlate``), for the model method
+    measuring the ball where ``prior`` has it (measure).
     """
     if method not in METHODS:
         raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
@@ -162,7 +165,7 @@ def detect(image, camera, radius, method='model', prior=None, gamma=1.0, search=
             return measure(img, camera, radius, method, np.asarray(prior.position, dtype=float),
                            prior.extra.get('psf_sigma'), gamma,
                            prior.extra.get('noise_levels'), prior.extra.get('edge_fraction'),
-                           prior.extra.get('highlight', LOOK))
+                           prior.extra.get('highlight', LOOK), background)
         except DetectionError:
             if not search:
                 raise
@@ -642,7 +645,7 @@ def _within(centre_a, ra, centre_b, rb):
 
 
 def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
-            edge_fraction=None, lobe=LOOK):
+            edge_fraction=None, lobe=LOOK, background=None):
     """
     Measure the sphere whose outline lies near that of sphere c0 (m), by ``method``.
 
@@ -658,7 +661,8 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
     A previous frame's ball is where it was: its fit is not made again (a wrong prior must fail,
     not wander to what lies beside it). From a previous frame's model fit, its ``noise_levels``
     settle the robust weights at once (model_fit.fit); its ``edge_fraction`` (extra
-    'edge_fraction' of an outline method's) sets what ``outline`` needs.
+    'edge_fraction' of an outline method's) sets what ``outline`` needs. ``background``: a plate
+    of what lies behind the ball (model_fit.fit), for the model fit from a previous frame's.
     """
     if method == 'baseline':
         centre = camera.project(c0)
@@ -671,7 +675,7 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
             if lobe is LOOK:                # at rest: c0 and its blur from the frame before
                 lobe = highlight.fit(img, camera, c0, radius, blur, gamma)
             fit = model_fit.fit(img, camera, radius, c0, blur, gamma, noise_levels=noise_levels,
-                                highlight=lobe)
+                                highlight=lobe, background=background)
         if lobe is LOOK:                    # from a search: where the fit ended, and again
             lobe = highlight.fit(img, camera, fit.c, radius, fit.blur, gamma)
             if lobe is not None:
@@ -698,7 +702,8 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
                          {'psf_sigma': fit.blur, 'noise': fit.noise, 'coverage': covered,
                           'rms': fit.rms, 'kept': fit.kept, 'iterations': fit.iterations,
                           'step': float(np.median(step)), 'noise_levels': fit.noise_levels,
-                          'highlight': lobe, 'limb_variation': limb})
+                          'highlight': lobe, 'limb_variation': limb,
+                          'plate_share': fit.plate_share})
     ideal, pf, sigma, c_out, fraction = outline(img, camera, radius, c0, blur, edge_fraction)
     xy = camera.to_normalized(ideal)
     weights = 1.0 / np.maximum(pf.sigma_e, 0.02) ** 2      # floored: no point outweighs the rest

@@ -36,6 +36,8 @@ where the terminator crosses the limb the shading is clamped (max(0, n.l)) and t
 misreads it; a lens's defocus is a disc, not the Gaussian assumed (benchmarks/vision.py measures
 both). A specular highlight is no part of this model: one found on the ball's disc is measured
 there and its predicted tail taken out of the annulus's pixels before the fit (``highlight``).
+A texture finer than a bin is no part of it either, unless a plate of the background from other
+views of the scene gives it (``background``, robotenis_vision.plate): then it is (``behind``).
 
 Geometry. The outline is the cone of rays touching the sphere, q(u) = (r.c)^2 - (c.c - R^2) r.r = 0
 for the ray r = K^-1 (u, 1) of an ideal (undistorted) pixel u (C1 of robotenis_vision.conic). A
@@ -57,6 +59,7 @@ from dataclasses import dataclass, field
 import functools
 
 import numpy as np
+from robotenis_vision import plate
 from robotenis_vision.detection import DetectionError
 from scipy.special import gamma as gamma_function, ndtr, pbdv
 
@@ -370,6 +373,7 @@ class ModelFit:
     prior_weights: np.ndarray = field(default=None, repr=False)   # (n,) before robust weights
     # the robust scale, the noise the weights assumed and the edge's, ball's, background's noise
     noise_levels: tuple = field(default=None, repr=False)
+    plate_share: float = None      # of the bins the background plate gave (None: no plate)
 
     def edge_bins(self, min_step=8.0):
         """
@@ -515,8 +519,62 @@ def linearise(values, gamma):
     return 255.0 * g ** gamma, g ** (2 - 2 * gamma)
 
 
+def behind(background, ann, geo, s, gamma):
+    """
+    Return the background's texture behind each annulus pixel, its slope, the share it covers.
+
+    ``background``: what lies behind the ball (``plate.BackgroundPlate``), linear units. T: per
+    bin, the plate less its mean over the bin (the bin's level b0 keeps the rest), over the pixels
+    the ball may leave to the background (within 4 blurs inside the outline at the start); T_t:
+    the plate's slope along the outline's inward normal there (central differences, per px).
+    Both zero in a bin whose plate there is not trusted (``plate.trusted``): such a bin keeps its
+    levels alone. T, T_t (n,); the share of those bins whose plate was trusted.
+    """
+    grey, scatter, dof = background.at(ann.pixels)
+    levels = linearise(np.nan_to_num(grey), gamma)[0]
+    step = [background.at(ann.pixels + o)[0] for o in ((1, 0), (-1, 0), (0, 1), (0, -1))]
+    du, dv = ((linearise(np.nan_to_num(a), gamma)[0] - linearise(np.nan_to_num(b), gamma)[0])
+              / 2 for a, b in (step[:2], step[2:]))
+    slope = -(du * np.cos(ann.angle) + dv * np.sin(ann.angle))
+    slope = np.where(np.all(np.isfinite(step), axis=0), slope, 0.0)
+    needed = geo.d < 4 * s
+    T, T_t = np.zeros(len(levels)), np.zeros(len(levels))
+    bins = np.flatnonzero(np.bincount(ann.bins[needed], minlength=len(ann.gather)))
+    used = 0
+    for b in bins:
+        k = ann.gather[b][ann.gather[b] >= 0]
+        k = k[needed[k]]
+        if plate.trusted(grey[k], scatter[k], dof[k]):
+            T[k], T_t[k] = levels[k] - levels[k].mean(), slope[k]
+            used += 1
+    return T, T_t, used / max(len(bins), 1)
+
+
+def texture_columns(T, T_t, geo, s):
+    """
+    Return a known background texture's share of the pixels, and its derivatives in t and s.
+
+    A background B(t) behind the edge, blurred by a Gaussian of width s with the ball's step:
+    B(t) (1 - Phi) - s B'(t) phi(tau), B' = T_t its slope inward (the first order of B's
+    expansion about the pixel; with B linear, the b1 column of ``columns``).
+    """
+    t = geo.d - 0.5 * s * s * geo.kappa
+    tau = t / s
+    Phi = ndtr(tau)
+    phi = np.exp(-0.5 * tau * tau) / np.sqrt(2 * np.pi)
+    value = T * (1 - Phi) - s * T_t * phi
+    d_dt = -T * phi / s + T_t * tau * phi
+    d_ds = T * phi * tau / s - T_t * phi * (1 + tau * tau)
+    return value, d_dt, d_ds - s * geo.kappa * d_dt
+
+
+def _known(texture, geo, s):
+    """Return texture_columns of ``behind``'s (T, T_t), or zeros without a plate."""
+    return (0.0, 0.0, 0.0) if texture is None else texture_columns(*texture[:2], geo, s)
+
+
 def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=True,
-        noise_levels=None, highlight=None):
+        noise_levels=None, highlight=None, background=None):
     """
     Fit the sphere of radius R to the image from a start c0 (m) whose outline is a pixel or so off.
 
@@ -529,7 +587,9 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
     rest): the robust scale and the zones' noise start there instead of being found in the first
     iterations, so that the weights are settled from the first step (half the iterations).
     ``highlight``: the ball's specular lobe measured on its disc (``highlight.fit``), taken out
-    of the annulus's pixels before the fit.
+    of the annulus's pixels before the fit. ``background``: a plate of what lies behind the ball
+    (``plate.BackgroundPlate``); the background's texture (``behind``) is then part of the model,
+    blurred with the edge as the levels are (``texture_columns``).
     """
     c = np.asarray(c0, dtype=float).copy()
     s = float(np.clip(blur0, *BLUR_RANGE))
@@ -541,9 +601,10 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
     geo = geometry(ann, camera, c, R)
     if highlight is not None:
         y = y - highlight.values(camera, ann.pixels, c, R, s)
+    texture = None if background is None else behind(background, ann, geo, s, gamma)
     X, H = columns(geo, ann, s)[:2]
     H = H if limb else H[:, :0]
-    beta, levels = _solve(X, H, y, w0, ann)[:2]
+    beta, levels = _solve(X, H, y - _known(texture, geo, s)[0], w0, ann)[:2]
     known = noise_levels is not None
     scale, noise, zone_noise = ((noise_levels[0], noise_levels[1], noise_levels[2:]) if known
                                 else (None, None, None))
@@ -552,7 +613,9 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
         if not limb:
             H, dH_dt, dH_ds = H[:, :0], dH_dt[:, :0], dH_ds[:, :0]
         lv = levels[ann.bins]
-        r = (y - np.einsum('ni,ni->n', X, lv) - H @ beta) * np.sqrt(w0)
+        seen, seen_dt, seen_ds = _known(texture, geo, s)
+        y_bt = y - seen                 # less the background's texture, where it shows
+        r = (y_bt - np.einsum('ni,ni->n', X, lv) - H @ beta) * np.sqrt(w0)
         if it <= 3 and not known:
             # floored: on an image without noise the model's own small misfit must not count as
             # outliers (a grey level: 8-bit rounding and a few tenths of a percent of a step)
@@ -574,11 +637,11 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
             factor = np.maximum(np.array(zone_noise)[zone] / noise, 1e-3)
             w0, r = w0 / factor ** 2, r / factor
         w = _weights(r, w0, ann, scale, noise)
-        dy_dt = np.einsum('ni,ni->n', dX_dt, lv) + dH_dt @ beta
-        dy_ds = np.einsum('ni,ni->n', dX_ds, lv) + dH_ds @ beta
+        dy_dt = np.einsum('ni,ni->n', dX_dt, lv) + dH_dt @ beta + seen_dt
+        dy_ds = np.einsum('ni,ni->n', dX_ds, lv) + dH_ds @ beta + seen_ds
         # linearised in c and s about the current values; levels and beta solved afresh
         G = np.column_stack([dy_dt[:, None] * geo.dd_dc, dy_ds, H])
-        p, levels, S_inv, level_inv = _solve(X, G, y, w, ann)
+        p, levels, S_inv, level_inv = _solve(X, G, y_bt, w, ann)
         dc, ds, beta = p[:3], p[3], p[4:]
         # at most MAX_STEP_PX of outline a step (the outline moves by about the image of dc)
         dc *= min(1.0, MAX_STEP_PX / max(np.max(np.abs(geo.dd_dc @ dc)), 1e-12))
@@ -597,7 +660,8 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
                              f'radius {grown:.1f} px off)')
     X, H = columns(geo, ann, s)[:2]
     H = H if limb else H[:, :0]
-    r = (y - np.einsum('ni,ni->n', X, levels[ann.bins]) - H @ beta) * np.sqrt(w0)
+    r = (y - _known(texture, geo, s)[0] - np.einsum('ni,ni->n', X, levels[ann.bins])
+         - H @ beta) * np.sqrt(w0)
     weight_noise, noise = noise, _noise(r, ann, w > 0)
     # the step's standard error from the bin's own normal equations and the larger of the noise
     # and the bin's residuals: a blurred edge's columns and the ramps beside them can sum to a flat
@@ -609,4 +673,5 @@ def fit(img, camera, R, c0, blur0=1.0, gamma=1.0, iterations=10, tol=0.01, limb=
     step_sd = spread * np.sqrt(np.maximum(
         level_inv[:, 0, 0] + level_inv[:, 2, 2] - 2 * level_inv[:, 0, 2], 0.0))
     return ModelFit(c, noise * noise * S_inv[:3, :3], s, noise, beta, levels, step_sd, w, r, it,
-                    ann, w0, (scale, weight_noise, *zone_noise))
+                    ann, w0, (scale, weight_noise, *zone_noise),
+                    None if texture is None else texture[2])

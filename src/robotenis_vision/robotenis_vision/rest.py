@@ -78,7 +78,7 @@ class MeanCorrection:
         if not motion_px > 0:
             raise ValueError(f'mean correction: motion_px must be positive, got {motion_px!r}')
         self.motion_px = float(motion_px)
-        self.delta = None
+        self.delta, self.n_fit = None, 0
         self.restart()
 
     def restart(self):
@@ -116,6 +116,7 @@ class MeanCorrection:
     def fitted(self, accurate_position):
         """Keep the correction from the accurate method's position on ``mean_image()``."""
         self.delta = np.asarray(accurate_position, dtype=float) - self.fast_sum / self.n
+        self.n_fit = self.n
 
     def corrected(self, fast_position):
         """Return the fast position plus the latest correction, or None before the first fit."""
@@ -132,19 +133,32 @@ class RestCorrection:
     search for one (detector.detect(search=False)): a fit of another ball would move every frame
     of the rest. ``every_frame``: the accurate method on every frame at rest instead (its own
     detection published), as the node measured before MeanCorrection: log2(n) - 1 fits become n.
+    ``seen(image, det, noise)``: called when a rest ends whose last fit succeeded, with the mean
+    image of its frames, that fit's Detection and the mean image's pixel noise (the fit's
+    'noise', scaled from the frames it had to all the rest's): the node adds it to its
+    background plate (robotenis_vision.plate).
     """
 
-    def __init__(self, motion_px, frames, accurate, label, every_frame=False):
+    def __init__(self, motion_px, frames, accurate, label, every_frame=False, seen=None):
         self.switch = RestSwitch(motion_px, frames)
         self.mean = MeanCorrection(motion_px)
         self.accurate, self.label, self.every_frame = accurate, label, every_frame
+        self.seen = seen
         self.last = None                # the accurate method's last Detection
+
+    def ended(self):
+        """Close a rest (the ball moved or was lost): its mean image goes to ``seen``."""
+        noise = self.last.extra.get('noise') if self.last is not None else None
+        if self.seen and noise and self.mean.n and not self.every_frame:
+            self.seen(self.mean.mean_image(), self.last,
+                      noise * np.sqrt(self.mean.n_fit / self.mean.n))
+        self.mean.reset()
+        self.last = None
 
     def lost(self):
         """Record a frame without a detection."""
         self.switch.lost()
-        self.mean.reset()
-        self.last = None
+        self.ended()
 
     def update(self, image, det, px):
         """
@@ -160,8 +174,7 @@ class RestCorrection:
         conic's ball would have published it, 0.4 m off, for the whole rest).
         """
         if not self.switch.update(px):
-            self.mean.reset()
-            self.last = None
+            self.ended()
             return det, None
         if self.every_frame:
             try:

@@ -20,7 +20,8 @@ about 15-40 ms a fit) runs on the mean image of the frames at rest on the first 
 number reaches 8, 16, 32, ... (robotenis_vision.rest), and every frame's fast detection is
 published corrected by it (method 'conic+model mean'), or dropped while it has no correction (the
 accurate fit refused that ball); while the ball moves the fast one is (figures: ``./robotenis
-bench vision``). Parameters: the table PARAMETERS.
+bench vision``). The fit at rest models the background behind the ball from a plate of the
+rests before (``background_plate``, robotenis_vision.plate). Parameters: the table PARAMETERS.
 """
 import sys
 
@@ -34,7 +35,7 @@ from robotenis_kinematics import description
 from robotenis_ros import cdr
 from robotenis_ros.convert import point_stamped, stamp_seconds
 from robotenis_ros.node import declare_parameters, spin
-from robotenis_vision import averaging, camera as camera_model, detector
+from robotenis_vision import averaging, camera as camera_model, detector, plate
 from robotenis_vision.rest import RestCorrection
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header, String
@@ -48,6 +49,10 @@ PARAMETERS = {
     'rest_every_frame': (False, 'rest_method on every frame at rest instead of on mean images '
                                 '(10x the CPU; its bias differs on scenes it misfits: bench '
                                 'vision)'),
+    'background_plate': (True, 'the fit at rest takes the background behind the ball from the '
+                               'rests before, where the ball was elsewhere (a camera that only '
+                               'translates, a background far behind the ball: '
+                               'robotenis_vision.plate; where the views disagree it is not used)'),
     'gamma': (1.0, "the camera's response, grey = 255 (I / 255)^(1 / gamma) (1: linear)"),
     'radius': (0.0, 'm: the sphere radius (0: from the robot description)'),
     'description_path': (description.config_path('nominal.yaml'), 'the robot description YAML'),
@@ -94,10 +99,12 @@ class SphereDetectorNode(Node):
             raise ValueError(f'gamma must be positive, got {self.gamma}')
         self.radius = float(p['radius']) or description.load(p['description_path']).sphere_radius
         self.rest = None                # the fast method corrected at rest (rest_method)
+        self.use_plate, self.plate = bool(p['background_plate']), None
         if self.rest_method and self.rest_method != self.method:
             self.rest = RestCorrection(float(p['rest_motion_px']), int(p['rest_frames']),
                                        self.rest_fit, self.rest_method,
-                                       bool(p['rest_every_frame']))
+                                       bool(p['rest_every_frame']),
+                                       self.rest_seen if self.use_plate else None)
         self.frames = max(1, int(p['frames']))
         self.max_rms = float(p['max_fit_rms_px'])
         self.use_prior = bool(p['use_prior'])
@@ -135,6 +142,7 @@ class SphereDetectorNode(Node):
         try:
             self.camera = camera_model.from_camera_info(msg)
             self.camera_key = key
+            self.plate = None           # another camera sees another background
         except camera_model.CameraError as e:
             self.get_logger().error(f'camera_info unusable: {e}', throttle_duration_sec=5.0)
 
@@ -189,8 +197,20 @@ class SphereDetectorNode(Node):
 
     def rest_fit(self, image, seed):
         """Run the rest method on an image from a seed (RestCorrection's accurate method)."""
-        return detector.detect(image, self.camera, self.radius, self.rest_method, seed,
-                               self.gamma, search=False)
+        det = detector.detect(image, self.camera, self.radius, self.rest_method, seed,
+                              self.gamma, search=False, background=self.plate)
+        if det.extra.get('plate_share') is not None:
+            self.get_logger().info(f'background plate of {self.plate.added} rests: in '
+                                   f"{100 * det.extra['plate_share']:.0f} % of the fit's bins",
+                                   throttle_duration_sec=10.0)
+        return det
+
+    def rest_seen(self, image, det, noise):
+        """Add a rest's mean image to the background plate (RestCorrection's ``seen``)."""
+        if self.plate is None or self.plate.shape != image.shape:
+            self.plate = plate.BackgroundPlate(image.shape)
+        self.plate.add(image, self.camera.project(det.position),
+                       self.camera.apparent_radius(det.position, self.radius), noise)
 
     def publish(self, det, header, frames):
         self.position_pub.publish(point_stamped(det.position, header.stamp, header.frame_id))

@@ -161,3 +161,29 @@ def test_a_ball_the_accurate_method_refuses_at_rest_is_not_published():
             assert out[1][1] == 'on the mean of 1 frames at rest: misfit'
             assert out[2][1] == 'at rest: no model correction yet (no fit of this rest has ' \
                                 'succeeded)'
+
+
+def test_a_rest_that_ends_shows_its_mean_image_and_its_noise_to_seen():
+    """The node's background plate gets each rest's mean image once the ball moves or is lost."""
+    shown = []
+
+    def accurate(image, seed):
+        return replace(seed, position=np.array([0.0, 0.0, 0.301]), extra={'noise': 0.8})
+
+    rest = RestCorrection(0.3, 1, accurate, 'model',
+                          seen=lambda image, det, noise: shown.append((image, det, noise)))
+    fast = detector.Detection(np.array([0.0, 0.0, 0.3]), np.eye(3) * 1e-10, np.zeros((0, 2)),
+                              0.1, 'conic')
+    frames = np.random.default_rng(2).integers(0, 256, (13, 4, 5)).astype(np.uint8)
+    for image in frames[:12]:                                 # 11 frames at rest: fits at 1, 8
+        rest.update(image, fast, (320.0, 240.0))
+    assert shown == []
+    rest.update(frames[12], fast, (330.0, 240.0))             # moved: the rest ends
+    (image, det, noise), = shown
+    np.testing.assert_allclose(image, frames[1:12].mean(axis=0), rtol=1e-6)
+    # the last fit's noise was of a mean of 8 frames; the image is a mean of 11
+    assert det.position[2] == 0.301 and noise == pytest.approx(0.8 * np.sqrt(8 / 11))
+    for image in frames[:3]:                                  # 3 frames at rest: a fit at 1
+        rest.update(image, fast, (330.0, 240.0))
+    rest.lost()                                               # lost: that rest ends too
+    assert len(shown) == 2 and shown[1][2] == pytest.approx(0.8 * np.sqrt(1 / 3))
