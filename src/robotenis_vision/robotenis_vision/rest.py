@@ -149,7 +149,7 @@ class RestCorrection:
     def ended(self):
         """Close a rest (the ball moved or was lost): its mean image goes to ``seen``."""
         noise = self.last.extra.get('noise') if self.last is not None else None
-        if self.seen and noise and self.mean.n and not self.every_frame:
+        if self.seen and noise and self.mean.n:      # (every_frame sums no frames)
             self.seen(self.mean.mean_image(), self.last,
                       noise * np.sqrt(self.mean.n_fit / self.mean.n))
         self.mean.reset()

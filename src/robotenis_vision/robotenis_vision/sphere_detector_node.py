@@ -99,12 +99,12 @@ class SphereDetectorNode(Node):
             raise ValueError(f'gamma must be positive, got {self.gamma}')
         self.radius = float(p['radius']) or description.load(p['description_path']).sphere_radius
         self.rest = None                # the fast method corrected at rest (rest_method)
-        self.use_plate, self.plate = bool(p['background_plate']), None
+        self.plate = None               # the background behind the ball (background_plate)
         if self.rest_method and self.rest_method != self.method:
             self.rest = RestCorrection(float(p['rest_motion_px']), int(p['rest_frames']),
                                        self.rest_fit, self.rest_method,
                                        bool(p['rest_every_frame']),
-                                       self.rest_seen if self.use_plate else None)
+                                       self.rest_seen if p['background_plate'] else None)
         self.frames = max(1, int(p['frames']))
         self.max_rms = float(p['max_fit_rms_px'])
         self.use_prior = bool(p['use_prior'])
