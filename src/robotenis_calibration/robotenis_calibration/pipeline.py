@@ -119,9 +119,10 @@ def calibrate_session(session, settings=Settings(), progress=None):
         tried.append(sided.direction)
         if progress:
             changed = int(np.sum(sided.direction != session.direction))
+            rules = '; '.join(session.side_rule(i) for i in pick)
             progress(f'backlash {np.round(d.final.model.effects["backlash"] * 1e3, 3)} mrad: '
-                     f'sides taken at gaps {np.round(session.gaps[pick] * 1e3, 3)} mrad, '
-                     f'{changed} of {session.direction.size} changed; the loop runs again')
+                     f'sides taken by {rules}, {changed} of {session.direction.size} changed; '
+                     'the loop runs again')
         session = sided
         d, meas = _loop(session, settings, progress)
     return d, meas
@@ -129,18 +130,20 @@ def calibrate_session(session, settings=Settings(), progress=None):
 
 def backlash_gaps(session, d):
     """
-    Return the index in ``session.gaps`` (3,) of each joint's gap whose sides fit best.
+    Return the index in ``session.approach``'s rules (3,) of each joint's whose sides fit best.
 
     Sides taken at too small a gap count short returns as reversals; the width fitted on them
     comes out smaller still, so a width and the sides at that width, found in turn, drift apart
-    (measured on live bags: 0.6 mrad found as 0.1). Instead each joint's gap is chosen, one
-    joint at a time until none changes, as the one whose sides give the smallest chi2 of the
-    diagnosis's final model refitted on its training rests, from the gap nearest the fitted
-    width: a profile of the likelihood over the gap, the held-out rests left out of it.
+    (measured on live bags: 0.6 mrad found as 0.1). Instead each joint's rule (a gap, or a speed
+    of the other family) is chosen, one joint at a time until none changes, as the one whose
+    sides give the smallest chi2 of the diagnosis's final model refitted on its training rests,
+    from the gap nearest the fitted width: a profile of the likelihood over the rules, the
+    held-out rests left out of it. Rules that give a joint the same training sides tie; the
+    middle of the widest run of them (``widest_run``) is taken.
     """
     R = session.description.camera_rotation
     final, floor = d.final, d.floor
-    known = {}                      # training rests' sides -> chi2: gaps often give the same sides
+    known = {}                      # training rests' sides -> chi2: rules often give the same
 
     def chi2(pick):
         sided = session.at_gaps(pick)
@@ -158,7 +161,7 @@ def backlash_gaps(session, d):
     best = chi2(pick)
     for _ in range(SIDE_ROUNDS):
         start = pick.copy()
-        for j, g in itertools.product(range(3), range(len(session.gaps))):
+        for j, g in itertools.product(range(3), range(session.approach.shape[1])):
             if g == pick[j]:
                 continue
             trial = pick.copy()
@@ -168,7 +171,41 @@ def backlash_gaps(session, d):
                 best, pick = value, trial
         if np.array_equal(pick, start):
             break
+    train = session.approach[d.train]
+    for j in range(3):
+        same = np.all(train[:, :, j] == train[:, pick[j], j][:, None], axis=0)
+        pick[j] = widest_run(same, [session.gaps, session.speeds])
     return pick
+
+
+def widest_run(same, grids):
+    """
+    Return the index of the middle of the widest run of True in ``same`` (sum of the grids' sizes).
+
+    ``same`` spans the candidate rules of ``grids`` (each a geometric grid of a rule's parameter,
+    in order: gaps, speeds); a run is one grid's neighbours giving the same sides, its width the
+    log of its parameter's range plus one grid step (a lone candidate is as wide as its step).
+    Where the training rests cannot tell rules apart, the one whose sides change least as its
+    parameter moves is the one held-out rests are likeliest to agree with.
+    """
+    best, index, offset = -np.inf, None, 0
+    for grid in grids:
+        log = np.log(grid)
+        step = log[1] - log[0] if len(grid) > 1 else 1.0
+        k = 0
+        while k < len(grid):
+            if same[offset + k]:
+                end = k
+                while end + 1 < len(grid) and same[offset + end + 1]:
+                    end += 1
+                width = log[end] - log[k] + step
+                if width > best + 1e-12:
+                    best, index = width, offset + (k + end) // 2
+                k = end + 1
+            else:
+                k += 1
+        offset += len(grid)
+    return index
 
 
 def _loop(session, settings, progress):

@@ -517,6 +517,38 @@ def approach_directions(t_joint, Theta, t0, previous, since=-np.inf, gaps=GAPS):
     return out
 
 
+# rad/s: speeds of the other family of sides, 0.05 to 1.8 rad/s, 25 % apart (above the
+# resolvers' 1-2 counts a reading: 0.04-0.08 rad/s at 1 kHz and 38 urad counts)
+SPEEDS = 0.05 * 1.25 ** np.arange(17)
+
+
+def fast_motion_sides(t_joint, Theta, t0, previous, since=-np.inf, speeds=SPEEDS):
+    """
+    Return each joint's contact side at the rest that starts at t0, per speed (V, 3).
+
+    The other family of backlash sides: a drive whose contact takes the side of its last motion
+    faster than v between successive readings, and keeps it through slower motion (a creep back
+    after an overshoot, a controller's dither at rest, a load the motor follows). A gap crossed
+    within one reading period reads as such a step. So the side is the sign of the last step in
+    [since, t0) faster than v; a joint without one keeps ``previous`` (V, 3), the sides of the
+    rest before. approach_directions' travel across a gap is the first family; the fit chooses
+    (pipeline.backlash_gaps).
+    """
+    i0, i1 = np.searchsorted(t_joint, since), np.searchsorted(t_joint, t0)
+    step = np.diff(Theta[i0:i1], axis=0)
+    dt = np.diff(t_joint[i0:i1])
+    speed = np.abs(step) / np.where(dt > 0, dt, np.inf)[:, None]
+    out = np.array(previous, dtype=float)
+    for j in range(3):
+        # the fastest step from each one on shrinks with time: the last step faster than v is
+        # at the last index where that maximum still exceeds v
+        fastest = np.maximum.accumulate(speed[::-1, j])[::-1]
+        last = np.searchsorted(-fastest, -np.asarray(speeds), side='left') - 1
+        crossed = last >= 0
+        out[crossed, j] = np.sign(step[last[crossed], j])
+    return out
+
+
 def average(rec, windows, params, notes):
     """Average the rests in ``windows`` into a Session (module docstring); skips go to notes."""
     _, q = resolver_noise(rec.Theta)
@@ -539,7 +571,8 @@ def average(rec, windows, params, notes):
     camera = frame_noise([x[_provisional(x)] for x in spheres], z, np.full(3, SPHERE_FLOOR ** 2))
     joints = frame_noise(readings, z, q ** 2 / 12, grow=False)
     camera_cov, joint_cov = camera.covariance(z), joints.covariance(z)
-    rows, rejected, total, direction, since = [], 0, 0, np.ones((len(GAPS), 3)), -np.inf
+    rows, rejected, total, since = [], 0, 0, -np.inf
+    direction, fast = np.ones((len(GAPS), 3)), np.ones((len(SPEEDS), 3))
     for k, (t0, t1, label) in enumerate(kept_windows):
         keep = known_gate(spheres[k], camera_cov[k], params.alpha)
         keep_T = known_gate(readings[k], joint_cov[k], params.alpha)
@@ -551,16 +584,18 @@ def average(rec, windows, params, notes):
         rejected, total = rejected + len(keep) - n, total + len(keep)
         th = readings[k][keep_T].mean(axis=0)
         direction = approach_directions(rec.t_joint, rec.Theta, t0, direction, since)
+        fast = fast_motion_sides(rec.t_joint, rec.Theta, t0, fast, since)
         since = t0
         rows.append((th, np.sqrt(np.diag(joint_cov[k]) / n_T), spheres[k][keep].mean(axis=0),
-                     camera_cov[k] / n, 0.5 * (t0 + t1), n, direction))
+                     camera_cov[k] / n, 0.5 * (t0 + t1), n, np.vstack([direction, fast])))
     notes.append(f'{rejected} of {total} finite camera frames in the rests rejected as outliers')
     if not rows:
         return _empty(rec.description)
     Theta, sigma, sphere, cov, stamps, samples, approach = (np.array(v) for v in zip(*rows))
     return Session(rec.description, Theta, sigma, sphere, cov, stamps, samples,
                    approach[:, START_GAP], {'camera': camera.as_dict(),
-                                            'resolvers': joints.as_dict()}, approach, GAPS)
+                                            'resolvers': joints.as_dict()}, approach, GAPS,
+                   speeds=SPEEDS)
 
 
 def _provisional(x):

@@ -36,9 +36,11 @@ class Session:
         it (poses visited but not measured lie between rests); by default from the order of Theta.
     noise : the frames' and readings' noise models the averages were made with (plain data, for the
         result file), or None.
-    approach : (K, G, 3) the backlash contact side for a gap of each of ``gaps`` (G,) rad: the
-        sign of the last reversal of the readings across it (rests.approach_directions), when the
-        recording shows the motion; ``direction`` is one of them.
+    approach : (K, G + V, 3) the backlash contact side by each candidate rule, when the recording
+        shows the motion: for a gap of each of ``gaps`` (G,) rad, the sign of the last reversal
+        of the readings across it (rests.approach_directions); then, for each of ``speeds`` (V,)
+        rad/s, the sign of the last motion faster (rests.fast_motion_sides); ``direction`` is
+        one of them.
     timing : the recording's pace (plain data, rests.rest_timing): the camera's rate and the robot
         time a rest costs besides its frames; or None.
     """
@@ -55,6 +57,7 @@ class Session:
     approach: np.ndarray = field(default=None)
     gaps: np.ndarray = field(default=None)
     timing: dict = field(default=None)
+    speeds: np.ndarray = field(default=None)
 
     def __post_init__(self):
         K = len(self.Theta)
@@ -80,7 +83,7 @@ class Session:
                        self.sphere[index], self.sphere_cov[index], self.stamps[index],
                        self.samples[index], self.direction[index], self.noise,
                        None if self.approach is None else self.approach[index], self.gaps,
-                       self.timing)
+                       self.timing, self.speeds)
 
     def with_backlash(self, width):
         """
@@ -101,8 +104,14 @@ class Session:
         return nearest_gap(self.gaps, np.maximum(np.abs(width), self.gaps[0]))
 
     def at_gaps(self, pick):
-        """Return the session with each joint's sides taken at its gap ``gaps[pick]`` (3,)."""
+        """Return the session with each joint's sides taken by its rule ``pick`` (3,)."""
         return dataclasses.replace(self, direction=self.approach[:, pick, np.arange(3)])
+
+    def side_rule(self, index):
+        """Describe the candidate rule ``index`` of ``approach`` for a human: its gap or speed."""
+        if index < len(self.gaps):
+            return f'a gap of {self.gaps[index] * 1e3:.3f} mrad'
+        return f'motion faster than {self.speeds[index - len(self.gaps)]:.3f} rad/s'
 
     def measurements(self, camera_rotation=None):
         """

@@ -286,9 +286,10 @@ def test_backlash_sides_are_taken_at_the_gap_that_fits_best(tmp_path):
     The bag's moves are monotone and longer than any gap, so its sides are those of the
     smallest gap; here they are spoilt where the gap is far from the truth's width: below 0.7 of
     it (short returns counted as reversals) on 40 % of the rests, above 1.4 of it (reversals
-    missed) on 25 %, the start's coarse gap among them. A width fitted on the start's sides, and
-    the sides at that width in turn, may settle anywhere; the gap chosen by the fit gives back
-    the truth's sides and width.
+    missed) on 25 %, the start's coarse gap among them, and the other family's sides (of fast
+    motion) on 40 % at every speed. A width fitted on the start's sides, and the sides at that
+    width in turn, may settle anywhere; the gap chosen by the fit gives back the truth's sides
+    and width.
     """
     width = np.array(EFFECTS['backlash']['backlash'])
     bag = bag_sim.write(tmp_path / 'bag', bag_sim.BagSpec(poses=120, seed=17,
@@ -296,11 +297,14 @@ def test_backlash_sides_are_taken_at_the_gap_that_fits_best(tmp_path):
     session, _ = rests.load_session(bag.path)
     truth_sides = session.approach[:, 0]
     rng = np.random.default_rng(3)
-    approach = np.repeat(truth_sides[:, None, :], len(session.gaps), axis=1)
+    approach = np.repeat(truth_sides[:, None, :], session.approach.shape[1], axis=1)
     for j in range(3):
         for g, gap in enumerate(session.gaps):
             share = 0.4 if gap < 0.7 * width[j] else 0.25 if gap > 1.4 * width[j] else 0.0
             approach[rng.random(len(session)) < share, g, j] *= -1
+        # the other family (sides of fast motion) spoilt throughout: the gap must be found
+        for g in range(len(session.gaps), approach.shape[1]):
+            approach[rng.random(len(session)) < 0.4, g, j] *= -1
     spoilt = dataclasses.replace(session, approach=approach,
                                  direction=approach[:, rests.START_GAP])
     d, meas = pipeline.calibrate_session(spoilt)
@@ -309,6 +313,44 @@ def test_backlash_sides_are_taken_at_the_gap_that_fits_best(tmp_path):
     i = d.final.names.index('backlash1')
     z = (d.final.model.effects['backlash'] - width) / d.final.std[i:i + 3]
     assert np.sum(z ** 2) < chi2_bound(3), z
+
+
+def test_backlash_sides_of_fast_motion_are_taken_where_no_gap_fits(tmp_path):
+    """
+    A drive whose contact follows only its fast motion: no gap gives its sides; a speed does.
+
+    Every gap's sides are spoilt on 10 % of the rests (a creep back after an overshoot that a
+    play counts as a reversal); the fast-motion sides are the truth's at 0.15-0.6 rad/s only.
+    The fit takes a speed of that run, and the truth's sides.
+    """
+    bag = bag_sim.write(tmp_path / 'bag', bag_sim.BagSpec(poses=120, seed=17,
+                                                          effects=EFFECTS['backlash']))
+    session, _ = rests.load_session(bag.path)
+    truth_sides = session.approach[:, 0]
+    rng = np.random.default_rng(5)
+    approach = np.repeat(truth_sides[:, None, :], session.approach.shape[1], axis=1)
+    inside = (session.speeds > 0.15) & (session.speeds < 0.6)
+    for j in range(3):
+        for g in range(approach.shape[1]):
+            speed = g >= len(session.gaps)
+            share = 0.0 if speed and inside[g - len(session.gaps)] else 0.4 if speed else 0.1
+            approach[rng.random(len(session)) < share, g, j] *= -1
+    spoilt = dataclasses.replace(session, approach=approach,
+                                 direction=approach[:, rests.START_GAP])
+    d, meas = pipeline.calibrate_session(spoilt)
+    np.testing.assert_array_equal(meas.direction, truth_sides)
+
+
+def test_of_rules_that_tie_the_middle_of_the_widest_run_is_taken():
+    """widest_run: runs are measured in log of the parameter, each grid with its own step."""
+    gaps, speeds = 1e-4 * 1.05 ** np.arange(10), 0.05 * 1.25 ** np.arange(6)
+    same = np.zeros(16, dtype=bool)
+    same[2:7] = True                    # five gaps 5 % apart: log width 5 log(1.05) = 0.24
+    same[12:14] = True                  # two speeds 25 % apart: 2 log(1.25) = 0.45
+    assert pipeline.widest_run(same, [gaps, speeds]) == 12
+    same[12:14] = False
+    same[15] = True                     # one speed: 0.22, narrower than the five gaps
+    assert pipeline.widest_run(same, [gaps, speeds]) == 4
 
 
 def test_joint_states_serialized_by_rclpy_are_read(tmp_path):

@@ -103,6 +103,30 @@ def test_a_reversal_across_the_gap_counts_even_where_it_straddles_the_rest():
     assert list(sides[at]) == [-1.0, 1.0, -1.0]
 
 
+def test_sides_of_fast_motion_keep_through_a_slow_creep_back():
+    """
+    fast_motion_sides: the sign of the last step faster than each speed; a slow creep keeps it.
+
+    Joint 1 rises at 0.9 rad/s, crosses a 0.6 mrad gap back within one 1 ms reading (0.6 rad/s),
+    then creeps up 0.8 mrad at 0.01 rad/s; joint 2 falls at 0.9 rad/s; joint 3 stands.
+    """
+    rise, creep = np.linspace(0.0, 45e-3, 51), 44.4e-3 + np.linspace(1e-5, 8e-4, 80)
+    one = np.concatenate([rise, creep])
+    Theta = np.column_stack([one, -np.minimum(np.arange(131) * 9e-4, 45e-3), np.zeros(131)])
+    t = np.arange(131) * 1e-3
+    previous = np.full((len(rests.SPEEDS), 3), -1.0)
+    sides = rests.fast_motion_sides(t, Theta, 1.0, previous)
+    v = rests.SPEEDS
+    expected = np.where(v < 0.6, -1.0, np.where(v < 0.9, 1.0, -1.0))   # the jump, the rise
+    np.testing.assert_array_equal(sides[:, 0], expected)
+    np.testing.assert_array_equal(sides[:, 1], -1.0)
+    np.testing.assert_array_equal(sides[:, 2], previous[:, 2])
+    # a play (the travel family) at a 0.7 mrad gap takes the creep, 0.8 mrad, for a reversal
+    gap = rests.nearest_gap(rests.GAPS, 7e-4)[0]
+    travel = rests.approach_directions(t, Theta, 1.0, np.ones((len(rests.GAPS), 3)))
+    assert travel[gap, 0] == 1.0
+
+
 def test_the_pace_of_a_recording_is_its_camera_rate_and_the_time_between_rests(tmp_path):
     """rest_timing: 120 Hz, and 1 s besides the frames: a 0.4 s move, 0.5 s settle, 0.1 s tail."""
     spec = session_bag.BagSpec(poses=12, seed=2, move_time=(0.4, 0.0), settle=0.5)

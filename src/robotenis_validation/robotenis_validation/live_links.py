@@ -12,6 +12,10 @@ calibration node records it) and the simulator's truth file it ran with, and pri
   a rest's error that averaging its frames does not remove (study.detector_bias), and what is left
   of the rests' error without it; and the model method's bias without the renderer's specular
   highlight, then without its lens blur (BIAS_SOURCES): where the bias comes from;
+* the rests emulated offline (study.rest_errors, twice with fresh noise): the node's own step
+  on frames rendered at the true positions, without the robot's dynamics, the timing or ROS; the
+  rests' error less the emulated, and how much of the emulated is noise (the two emulations'
+  difference) and how much the detector's error at rest pose by pose (what they share);
 * the rests' first 1, 3, 10 frames averaged against the truth: where the rests' own floor stops
   more frames from helping;
 * the backlash side: the same difference when each joint's side is the one that fits best (a
@@ -20,7 +24,8 @@ calibration node records it) and the simulator's truth file it ran with, and pri
 * the bag calibrated as recorded and with each rest's detector bias taken out (what the chain
   would give with an unbiased detector): the effects claimed and the FK error against the truth
   at the session's rests (RMS, and less its common offset, which the hand camera barely sees)
-  and over boundary poses of the whole workspace;
+  and over boundary poses of the whole workspace; and with the two emulations' mean error taken
+  out (what the chain would give without the detector's error at rest, noise aside);
 * with RESULT, its FK error against the truth over the whole workspace.
 
 The held-out error against the truth is the loop's own held-out error (the demo's, issue 15's
@@ -30,8 +35,10 @@ ball position absorbs. The FK over the workspace extrapolates far from the poses
 watching one ball can reach.
 """
 import argparse
+from concurrent.futures import ProcessPoolExecutor
 import dataclasses
 import itertools
+import os
 import sys
 
 import numpy as np
@@ -39,10 +46,12 @@ from robotenis_calibration import bag_io, diagnosis, pipeline, rests, result
 from robotenis_kinematics import delta, description, effects, workspace
 from robotenis_sim import camera_model, static_session
 from robotenis_sim import truth as sim_truth
-from robotenis_validation.study import detector_bias
+from robotenis_validation.study import detector_bias, rest_errors
 
 METHODS = ('conic', 'model')
 FIRST_FRAMES = (1, 3, 10)       # frames of each rest averaged by first_frames_error
+SETTLE_FRAMES = 12              # frames at rest before a rest's average: the demo's 0.1 s, 120 Hz
+EMULATION_SEEDS = (1, 2)        # two emulations of the rests: their difference is the noise
 # the renderer's defaults, one at a time, that the model method's bias comes from
 BIAS_SOURCES = {'no specular highlight': {'lighting': camera_model.Lighting(specular=0.0)},
                 'no lens blur': {'blur_sigma': 0.0}}
@@ -209,6 +218,33 @@ def calibration_line(label, session, truth, true_sides):
             "differ from the simulator's")
 
 
+def emulated_rests(C, radius, frames, settle=SETTLE_FRAMES, seeds=EMULATION_SEEDS):
+    """
+    Return the rests' errors (len(seeds), K, 3), m, emulated offline (study.rest_errors).
+
+    Each seed draws fresh noise over the same poses: the emulations' difference is the rests'
+    noise; what they share is the detector's bias at rest, pose by pose. One process per seed
+    (about 40 s each for 90 rests here).
+    """
+    with ProcessPoolExecutor(max_workers=min(len(seeds), os.cpu_count() or 1)) as pool:
+        runs = [pool.submit(rest_errors, C, radius, frames, settle, seed) for seed in seeds]
+        return np.array([run.result() for run in runs])
+
+
+def split_noise(emulated):
+    """
+    Return the rests' noise and pose-dependent error, each (3,) std, m, from two emulations.
+
+    noise^2 = var(e1 - e2) / 2; the pose-dependent part's variance is var((e1 + e2) / 2) less
+    the half of noise^2 left in a mean of two (floored at 0).
+    """
+    e1, e2 = emulated[:2]
+    ok = np.all(np.isfinite(e1) & np.isfinite(e2), axis=1)
+    noise2 = np.var(e1[ok] - e2[ok], axis=0) / 2
+    shared = np.var((e1[ok] + e2[ok]) / 2, axis=0) - noise2 / 2
+    return np.sqrt(noise2), np.sqrt(np.maximum(shared, 0.0))
+
+
 def _line(label, e):
     return (f'{label:46s} mean {np.round(e.mean(axis=0) * 1e3, 3)} std '
             f'{np.round(e.std(axis=0) * 1e3, 3)} mm ({len(e)})')
@@ -237,6 +273,15 @@ def main(argv=None):
     for label, options in BIAS_SOURCES.items():
         b = detector_bias(C, truth.geometry.sphere_radius, 'model', **options)
         print(_line(f'detector bias (model), {label}', b[np.all(np.isfinite(b), axis=1)]))
+    emulated = emulated_rests(C, truth.geometry.sphere_radius, int(np.median(session.samples)))
+    ok = np.all(np.isfinite(emulated), axis=(0, 2))
+    print(_line('rests emulated offline (the node, fresh noise)', emulated[0][ok]))
+    print(_line('rests minus the emulated', (error - emulated[0])[ok]))
+    r = [np.corrcoef(error[ok, i], emulated[0][ok, i])[0, 1] for i in range(3)]
+    print(f'  correlation of the rests with the emulated, x y z: {np.round(r, 2)}')
+    noise, pose = split_noise(emulated)
+    print(f'  emulated rests: noise std {np.round(noise * 1e3, 3)} mm, the detector at rest '
+          f'pose by pose {np.round(pose * 1e3, 3)} mm')
     for n, e in first_frames_error(rec, truth, session, sides).items():
         print(_line(f'rests minus truth, their first {n} frames', e))
     e, flipped = best_sides(truth, session, sides)
@@ -244,6 +289,8 @@ def main(argv=None):
     print(calibration_line('calibrated as recorded', session, truth, true_sides))
     print(calibration_line('calibrated with the model bias taken out',
                            without_bias(session, bias['model']), truth, true_sides))
+    print(calibration_line("calibrated with the emulated rests' mean error taken out",
+                           without_bias(session, emulated.mean(axis=0)), truth, true_sides))
     if args.result:
         print(f'FK of {args.result} against the truth over 500 boundary poses: '
               f'{workspace_error_mm(description.load(args.result), truth):.3f} mm '

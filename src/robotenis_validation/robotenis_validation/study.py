@@ -8,6 +8,7 @@ from robotenis_sim.scenarios import BALL_GUESS_ERROR
 from robotenis_vision import camera as vision_camera
 from robotenis_vision import detector
 from robotenis_vision.plate import BackgroundPlate, NOISE_FLOOR
+from robotenis_vision.rest import MOTION_PX, RestCorrection, STILL_FRAMES
 
 
 def detector_bias(C, radius, method='model', camera=None, plate=True, **render_options):
@@ -40,6 +41,54 @@ def detector_bias(C, radius, method='model', camera=None, plate=True, **render_o
         if behind is not None:      # a noise-free render: its noise is the 8 bits' rounding
             behind.add(image, camera.project(det.position),
                        camera.apparent_radius(det.position, radius), NOISE_FLOOR)
+    return out
+
+
+def rest_errors(C, radius, frames, settle, seed, camera=None, plate=True, **render_options):
+    """
+    Return the error (K, 3), m, of rests at true centres C (K, 3, optical) as the node measures.
+
+    The sphere_detector node's step on every frame, offline: each rest is ``settle`` + ``frames``
+    frames of the still ball at C[k] rendered by the hand camera's renderer with fresh noise
+    (``seed``; ``render_options`` of camera_model.render), each measured by the conic method
+    seeded by the frame before and corrected at rest by the model fit on mean images
+    (rest.RestCorrection with the node's defaults), the fit's background plate (``plate``) built
+    from the rests before, in the order of C (the node's outline RMS check, which a still ball's
+    detections pass, is left out). A row is the mean of the last ``frames`` published
+    positions less C[k]: what a session averages at that rest. NaN where fewer were published.
+    Unlike detector_bias, it carries the frames' noise and the fit's bias on mean images of
+    noisy frames, which may differ from its bias on a noise-free render.
+    """
+    camera = camera or vision_camera.default()
+    rng = np.random.default_rng(seed)
+    behind = BackgroundPlate((camera.height, camera.width)) if plate else None
+
+    def accurate(image, start):
+        return detector.detect(image, camera, radius, 'model', start, search=False,
+                               background=behind)
+
+    def seen(image, det, noise):
+        behind.add(image, camera.project(det.position),
+                   camera.apparent_radius(det.position, radius), noise)
+
+    rest = RestCorrection(MOTION_PX, STILL_FRAMES, accurate, 'model', seen=seen if plate else None)
+    out = np.full((len(C), 3), np.nan)
+    for k, c in enumerate(np.asarray(C, dtype=float)):
+        prior, published = None, []
+        for j in range(settle + frames):
+            image = camera_model.render(camera, c, radius, rng, **render_options)
+            try:
+                prior = detector.detect(image, camera, radius, 'conic', prior)
+            except detector.DetectionError:
+                rest.lost()
+                prior = None
+                continue
+            det, _ = rest.update(image, prior, camera.project(prior.position))
+            if j >= settle and det is not None:
+                published.append(det.position)
+        rest.lost()                     # the robot moves on to the next pose
+        if len(published) == frames:
+            out[k] = np.mean(published, axis=0) - c
     return out
 
 

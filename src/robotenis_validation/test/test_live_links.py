@@ -44,6 +44,35 @@ def test_the_noise_free_bias_is_what_averaging_frames_leaves():
         len(dets) - 1) / (len(dets) - 3)
 
 
+def test_emulated_rests_without_noise_are_the_noise_free_bias():
+    """
+    rest_errors on noise-free renders is detector_bias, within the fit's standard error there.
+
+    Both fit the same image from different starts (the node's seeded rest fits, a cold
+    detection): they may differ by what the fit cannot tell apart, never by more.
+    """
+    camera, R = vision_camera.default(), 0.019
+    C = np.array([[0.02, 0.01, 0.30], [-0.05, 0.03, 0.36]])
+    e = study.rest_errors(C, R, 12, 6, 0, plate=False, noise_sigma=0.0)
+    bias = study.detector_bias(C, R, plate=False)
+    rng = np.random.default_rng(0)
+    for k, c in enumerate(C):
+        det = detector.detect(camera_model.render(camera, c, R, rng, noise_sigma=0.0), camera, R)
+        assert np.all(np.abs(e[k] - bias[k]) < np.sqrt(np.diag(det.covariance))), k
+    noisy = [study.rest_errors(C[:1], R, 12, 6, seed, plate=False) for seed in (1, 2)]
+    assert not np.allclose(*noisy)                                      # fresh noise each seed
+
+
+def test_two_emulations_split_into_their_noise_and_what_they_share():
+    """split_noise recovers a shared error and independent noise of known spreads."""
+    rng = np.random.default_rng(4)
+    shared = rng.normal(scale=[1e-5, 2e-5, 6e-5], size=(4000, 3))
+    emulated = shared + rng.normal(scale=[1e-5, 1e-5, 4e-5], size=(2, 4000, 3))
+    noise, pose = live_links.split_noise(emulated)
+    np.testing.assert_allclose(noise, [1e-5, 1e-5, 4e-5], rtol=0.05)    # 4000 draws: ~1 %
+    np.testing.assert_allclose(pose, [1e-5, 2e-5, 6e-5], rtol=0.05)
+
+
 def test_the_truths_own_geometry_has_no_fk_error_at_the_rests(tmp_path):
     """rest_error_mm: zero for the truth's geometry; the nominal's, less its offset, is smaller."""
     bag = session_bag.write(tmp_path / 'bag', session_bag.BagSpec(poses=30, seed=5))

@@ -40,6 +40,7 @@ import numpy as np
 from robotenis_vision.detection import DetectionError
 
 FIRST_MEAN = 8                  # frames at rest of the first fit on a mean image after the first
+MOTION_PX, STILL_FRAMES = 0.3, 3    # the node's defaults: rest_motion_px, rest_frames
 
 
 class RestSwitch:

@@ -36,7 +36,7 @@ from robotenis_ros import cdr
 from robotenis_ros.convert import point_stamped, stamp_seconds
 from robotenis_ros.node import declare_parameters, spin
 from robotenis_vision import averaging, camera as camera_model, detector, plate
-from robotenis_vision.rest import RestCorrection
+from robotenis_vision.rest import MOTION_PX, RestCorrection, STILL_FRAMES
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header, String
 
@@ -44,8 +44,9 @@ PARAMETERS = {
     'method': ('conic', f"on every frame: one of {', '.join(detector.METHODS)}"),
     'rest_method': ('model', 'once the ball stands still in the image: corrects the detection '
                              "from the frames' mean image (one of the methods, or '' for never)"),
-    'rest_motion_px': (0.3, 'px: the ball stands still when its centre moves less between frames'),
-    'rest_frames': (3, 'frames it must stand still for rest_method'),
+    'rest_motion_px': (MOTION_PX, 'px: the ball stands still when its centre moves less '
+                                  'between frames'),
+    'rest_frames': (STILL_FRAMES, 'frames it must stand still for rest_method'),
     'rest_every_frame': (False, 'rest_method on every frame at rest instead of on mean images '
                                 '(10x the CPU; its bias differs on scenes it misfits: bench '
                                 'vision)'),
