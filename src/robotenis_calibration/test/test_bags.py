@@ -8,6 +8,7 @@ Tolerances are chi-square quantiles at 1 - 1e-3 of the stated noise, so each che
 about once in a thousand runs at most.
 """
 import dataclasses
+import itertools
 import os
 import shutil
 import signal
@@ -279,34 +280,45 @@ def test_backlash_sides_ignore_an_overshoot_shorter_than_the_gap(tmp_path):
     assert np.sum(z ** 2) < chi2_bound(3), z
 
 
-def test_backlash_sides_are_taken_at_the_gap_that_fits_best(tmp_path):
+def spoilt_sides(tmp_path, seed, share):
     """
-    Sides taken at a wrong gap are wrong on a share of the rests; the fit picks the right gap.
+    Return (session, its true sides, the session with every rule's sides spoilt).
 
-    The bag's moves are monotone and longer than any gap, so its sides are those of the
-    smallest gap; here they are spoilt where the gap is far from the truth's width: below 0.7 of
-    it (short returns counted as reversals) on 40 % of the rests, above 1.4 of it (reversals
-    missed) on 25 %, the start's coarse gap among them, and the other family's sides (of fast
-    motion) on 40 % at every speed. A width fitted on the start's sides, and the sides at that
-    width in turn, may settle anywhere; the gap chosen by the fit gives back the truth's sides
-    and width.
+    A simulated 120-pose bag with a backlash: its moves are monotone and longer than any gap, so
+    every rule gives the truth's sides; ``share(j, g)`` of the rests then get joint j's side by
+    rule g (an index in ``approach``: the gaps, then the speeds) flipped.
     """
-    width = np.array(EFFECTS['backlash']['backlash'])
     bag = bag_sim.write(tmp_path / 'bag', bag_sim.BagSpec(poses=120, seed=17,
                                                           effects=EFFECTS['backlash']))
     session, _ = rests.load_session(bag.path)
     truth_sides = session.approach[:, 0]
-    rng = np.random.default_rng(3)
+    rng = np.random.default_rng(seed)
     approach = np.repeat(truth_sides[:, None, :], session.approach.shape[1], axis=1)
-    for j in range(3):
-        for g, gap in enumerate(session.gaps):
-            share = 0.4 if gap < 0.7 * width[j] else 0.25 if gap > 1.4 * width[j] else 0.0
-            approach[rng.random(len(session)) < share, g, j] *= -1
-        # the other family (sides of fast motion) spoilt throughout: the gap must be found
-        for g in range(len(session.gaps), approach.shape[1]):
-            approach[rng.random(len(session)) < 0.4, g, j] *= -1
-    spoilt = dataclasses.replace(session, approach=approach,
-                                 direction=approach[:, rests.START_GAP])
+    for j, g in itertools.product(range(3), range(approach.shape[1])):
+        approach[rng.random(len(session)) < share(j, g), g, j] *= -1
+    return session, truth_sides, dataclasses.replace(session, approach=approach,
+                                                     direction=approach[:, rests.START_GAP])
+
+
+def test_backlash_sides_are_taken_at_the_gap_that_fits_best(tmp_path):
+    """
+    Sides taken at a wrong gap are wrong on a share of the rests; the fit picks the right gap.
+
+    The sides are spoilt where the gap is far from the truth's width: below 0.7 of it (short
+    returns counted as reversals) on 40 % of the rests, above 1.4 of it (reversals missed) on
+    25 %, the start's coarse gap among them, and the other family's sides (of fast motion) on
+    40 % at every speed. A width fitted on the start's sides, and the sides at that width in
+    turn, may settle anywhere; the gap chosen by the fit gives back the truth's sides and width.
+    """
+    width = np.array(EFFECTS['backlash']['backlash'])
+
+    def share(j, g):
+        if g >= len(rests.GAPS):
+            return 0.4
+        gap = rests.GAPS[g]
+        return 0.4 if gap < 0.7 * width[j] else 0.25 if gap > 1.4 * width[j] else 0.0
+
+    _, truth_sides, spoilt = spoilt_sides(tmp_path, 3, share)
     d, meas = pipeline.calibrate_session(spoilt)
     assert 'backlash' in d.final.model.effects
     np.testing.assert_array_equal(meas.direction, truth_sides)
@@ -323,20 +335,12 @@ def test_backlash_sides_of_fast_motion_are_taken_where_no_gap_fits(tmp_path):
     play counts as a reversal); the fast-motion sides are the truth's at 0.15-0.6 rad/s only.
     The fit takes a speed of that run, and the truth's sides.
     """
-    bag = bag_sim.write(tmp_path / 'bag', bag_sim.BagSpec(poses=120, seed=17,
-                                                          effects=EFFECTS['backlash']))
-    session, _ = rests.load_session(bag.path)
-    truth_sides = session.approach[:, 0]
-    rng = np.random.default_rng(5)
-    approach = np.repeat(truth_sides[:, None, :], session.approach.shape[1], axis=1)
-    inside = (session.speeds > 0.15) & (session.speeds < 0.6)
-    for j in range(3):
-        for g in range(approach.shape[1]):
-            speed = g >= len(session.gaps)
-            share = 0.0 if speed and inside[g - len(session.gaps)] else 0.4 if speed else 0.1
-            approach[rng.random(len(session)) < share, g, j] *= -1
-    spoilt = dataclasses.replace(session, approach=approach,
-                                 direction=approach[:, rests.START_GAP])
+    G, v = len(rests.GAPS), rests.SPEEDS
+
+    def share(j, g):
+        return 0.1 if g < G else 0.0 if 0.15 < v[g - G] < 0.6 else 0.4
+
+    _, truth_sides, spoilt = spoilt_sides(tmp_path, 5, share)
     d, meas = pipeline.calibrate_session(spoilt)
     np.testing.assert_array_equal(meas.direction, truth_sides)
 
