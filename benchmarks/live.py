@@ -98,7 +98,7 @@ def live_bag(bag, robot, seed):
     Calibrated again as the service did, as recorded and with the detector's error at each rest
     taken out: the mean of two emulations of the node's rests at the true poses with fresh noise
     (live_links.emulated_rests; what the chain would give with a detector exact at rest, but
-    for the rests' noise).
+    for noise: the rests' own and half an emulation's).
     """
     session, d, meas = live_links.calibrated_as_the_service(bag, seed)
     true_sides = live_links.TrueSides.of_bag(bag, robot)

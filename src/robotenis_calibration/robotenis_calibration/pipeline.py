@@ -106,8 +106,8 @@ def calibrate_session(session, settings=Settings(), progress=None):
         raise CalibrationError(f'only {len(session)} usable rests in the session; at least '
                                f'{MIN_POSES} are needed')
     d, meas = _loop(session, settings, progress)
-    # the sides were first taken at a coarse gear's gap; with a backlash found, each joint's gap
-    # is chosen by the fit, and the loop runs again on those sides until they stay
+    # the sides were first taken at a coarse gear's gap; with a backlash found, each joint's rule
+    # (a gap or a speed) is chosen by the fit, and the loop runs again on its sides until they stay
     tried = [session.direction]
     for _ in range(SIDE_ROUNDS):
         if 'backlash' not in d.final.model.effects or session.approach is None:
@@ -130,7 +130,7 @@ def calibrate_session(session, settings=Settings(), progress=None):
 
 def backlash_gaps(session, d):
     """
-    Return the index in ``session.approach``'s rules (3,) of each joint's whose sides fit best.
+    Return the index among ``session.approach``'s rules (3,) of each joint's best-fitting rule.
 
     Sides taken at too small a gap count short returns as reversals; the width fitted on them
     comes out smaller still, so a width and the sides at that width, found in turn, drift apart
@@ -172,9 +172,10 @@ def backlash_gaps(session, d):
         if np.array_equal(pick, start):
             break
     train = session.approach[d.train]
+    grids = [grid for grid in (session.gaps, session.speeds) if grid is not None]
     for j in range(3):
         same = np.all(train[:, :, j] == train[:, pick[j], j][:, None], axis=0)
-        pick[j] = widest_run(same, [session.gaps, session.speeds])
+        pick[j] = widest_run(same, grids)
     return pick
 
 
@@ -184,9 +185,11 @@ def widest_run(same, grids):
 
     ``same`` spans the candidate rules of ``grids`` (each a geometric grid of a rule's parameter,
     in order: gaps, speeds); a run is one grid's neighbours giving the same sides, its width the
-    log of its parameter's range plus one grid step (a lone candidate is as wide as its step).
-    Where the training rests cannot tell rules apart, the one whose sides change least as its
-    parameter moves is the one held-out rests are likeliest to agree with.
+    log of the parameter's interval it covers: its range plus one grid step (half a step each
+    side; a lone candidate is as wide as its step). Where the training rests cannot tell rules
+    apart, the one whose sides change least as its parameter moves is the one held-out rests are
+    likeliest to agree with. Between the families (a gap in rad, a speed in rad/s) the widths are
+    ratios, with no common scale: a lone speed (25 % steps) outweighs four tied gaps (5 %).
     """
     best, index, offset = -np.inf, None, 0
     for grid in grids:

@@ -517,8 +517,9 @@ def approach_directions(t_joint, Theta, t0, previous, since=-np.inf, gaps=GAPS):
     return out
 
 
-# rad/s: speeds of the other family of sides, 0.05 to 1.8 rad/s, 25 % apart (above the
-# resolvers' 1-2 counts a reading: 0.04-0.08 rad/s at 1 kHz and 38 urad counts)
+# rad/s: speeds of the other family of sides, 0.05 to 1.8 rad/s, 25 % apart; the slowest are
+# within the resolvers' 1-2 counts a reading (0.04-0.08 rad/s at 1 kHz and 38 urad counts), where
+# a dither at rest reads as motion: the fit refuses those when they give wrong sides
 SPEEDS = 0.05 * 1.25 ** np.arange(17)
 
 

@@ -115,11 +115,12 @@ def test_sides_of_fast_motion_keep_through_a_slow_creep_back():
     Theta = np.column_stack([one, -np.minimum(np.arange(131) * 9e-4, 45e-3), np.zeros(131)])
     t = np.arange(131) * 1e-3
     previous = np.full((len(rests.SPEEDS), 3), -1.0)
+    previous[:, 1] = 1.0                # joint 2 must be seen falling
     sides = rests.fast_motion_sides(t, Theta, 1.0, previous)
     v = rests.SPEEDS
     expected = np.where(v < 0.6, -1.0, np.where(v < 0.9, 1.0, -1.0))   # the jump, the rise
     np.testing.assert_array_equal(sides[:, 0], expected)
-    np.testing.assert_array_equal(sides[:, 1], -1.0)
+    np.testing.assert_array_equal(sides[:, 1], np.where(v < 0.9, -1.0, 1.0))
     np.testing.assert_array_equal(sides[:, 2], previous[:, 2])
     # a play (the travel family) at a 0.7 mrad gap takes the creep, 0.8 mrad, for a reversal
     gap = rests.nearest_gap(rests.GAPS, 7e-4)[0]

@@ -54,8 +54,9 @@ def rest_errors(C, radius, frames, settle, seed, camera=None, plate=True, **rend
     seeded by the frame before and corrected at rest by the model fit on mean images
     (rest.RestCorrection with the node's defaults), the fit's background plate (``plate``) built
     from the rests before, in the order of C (the node's outline RMS check, which a still ball's
-    detections pass, is left out). A row is the mean of the last ``frames`` published
-    positions less C[k]: what a session averages at that rest. NaN where fewer were published.
+    detections pass, is left out). A row is the mean of the ``frames`` positions published after
+    the settle, less C[k]: what a session averages at that rest; NaN where one of those frames was
+    not published.
     Unlike detector_bias, it carries the frames' noise and the fit's bias on mean images of
     noisy frames, which may differ from its bias on a noise-free render.
     """
