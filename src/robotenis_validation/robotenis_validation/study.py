@@ -39,8 +39,7 @@ def detector_bias(C, radius, method='model', camera=None, plate=True, **render_o
             continue
         out[k] = det.position - c
         if behind is not None:      # a noise-free render: its noise is the 8 bits' rounding
-            behind.add(image, camera.project(det.position),
-                       camera.apparent_radius(det.position, radius), NOISE_FLOOR)
+            behind.add_ball(image, camera, det.position, radius, NOISE_FLOOR)
     return out
 
 
@@ -69,8 +68,7 @@ def rest_errors(C, radius, frames, settle, seed, camera=None, plate=True, **rend
                                background=behind)
 
     def seen(image, det, noise):
-        behind.add(image, camera.project(det.position),
-                   camera.apparent_radius(det.position, radius), noise)
+        behind.add_ball(image, camera, det.position, radius, noise)
 
     rest = RestCorrection(MOTION_PX, STILL_FRAMES, accurate, 'model', seen=seen if plate else None)
     out = np.full((len(C), 3), np.nan)

@@ -42,6 +42,10 @@ class BackgroundPlate:
         self.views = np.zeros(self.shape, dtype=np.int32)
         self.added = 0                         # views added
 
+    def add_ball(self, image, camera, position, radius, noise):
+        """Add a view with the ball at ``position`` (m, optical), ``radius`` (m), in ``camera``."""
+        self.add(image, camera.project(position), camera.apparent_radius(position, radius), noise)
+
     def add(self, image, centre_px, radius_px, noise):
         """
         Add a view: a mono image, the ball's centre and apparent radius in it (px), its noise.

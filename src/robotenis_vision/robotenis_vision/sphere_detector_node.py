@@ -210,8 +210,7 @@ class SphereDetectorNode(Node):
         """Add a rest's mean image to the background plate (RestCorrection's ``seen``)."""
         if self.plate is None or self.plate.shape != image.shape:
             self.plate = plate.BackgroundPlate(image.shape)
-        self.plate.add(image, self.camera.project(det.position),
-                       self.camera.apparent_radius(det.position, self.radius), noise)
+        self.plate.add_ball(image, self.camera, det.position, self.radius, noise)
 
     def publish(self, det, header, frames):
         self.position_pub.publish(point_stamped(det.position, header.stamp, header.frame_id))
