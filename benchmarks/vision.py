@@ -58,7 +58,7 @@ import mitsuba_scenes as ms  # noqa: E402
 import numpy as np  # noqa: E402
 from robotenis_sim import camera_model as cm  # noqa: E402
 from robotenis_vision import camera, detector  # noqa: E402
-from robotenis_vision.rest import RestCorrection  # noqa: E402
+from robotenis_vision.rest import outline_px, RestCorrection  # noqa: E402
 from scipy.stats import chi2  # noqa: E402
 
 cv2.setNumThreads(1)
@@ -588,7 +588,7 @@ def rest_pair(c, kw, rng, frames, averaged):
             return None
         prior = fast
         for k, way in enumerate(ways):
-            det, _ = way.update(image, fast, CAM.project(fast.position))
+            det, _ = way.update(image, fast, outline_px(CAM, fast.position, R))
             if way.switch.still >= way.switch.frames:     # at rest: what the node publishes
                 still[k] += 1
                 if det is not None:

@@ -8,7 +8,7 @@ from robotenis_sim.scenarios import BALL_GUESS_ERROR
 from robotenis_vision import camera as vision_camera
 from robotenis_vision import detector
 from robotenis_vision.plate import BackgroundPlate, NOISE_FLOOR
-from robotenis_vision.rest import MOTION_PX, RestCorrection, STILL_FRAMES
+from robotenis_vision.rest import MOTION_PX, outline_px, RestCorrection, STILL_FRAMES
 
 
 def detector_bias(C, radius, method='model', camera=None, plate=True, **render_options):
@@ -82,7 +82,7 @@ def rest_errors(C, radius, frames, settle, seed, camera=None, plate=True, **rend
                 rest.lost()
                 prior = None
                 continue
-            det, _ = rest.update(image, prior, camera.project(prior.position))
+            det, _ = rest.update(image, prior, outline_px(camera, prior.position, radius))
             if j >= settle and det is not None:
                 published.append(det.position)
         rest.lost()                     # the robot moves on to the next pose

@@ -14,7 +14,7 @@ ambiguous).
 Two methods (robotenis_vision.rest): ``method`` (default 'conic', seeded by the last frame: about
 1.5 ms a frame; a search of the whole image when the seed is lost, and while the ball stays lost
 once every ``search_interval`` of image time) on every frame, and once the
-ball has stood still in the image (its centre moved less than ``rest_motion_px`` for
+ball has stood still in the image (its outline moved less than ``rest_motion_px`` for
 ``rest_frames`` frames: the robot at rest) ``rest_method`` (default 'model', the accurate fit,
 about 15-40 ms a fit) runs on the mean image of the frames at rest on the first and when their
 number reaches 8, 16, 32, ... (robotenis_vision.rest), and every frame's fast detection is
@@ -36,7 +36,7 @@ from robotenis_ros import cdr
 from robotenis_ros.convert import point_stamped, stamp_seconds
 from robotenis_ros.node import declare_parameters, spin
 from robotenis_vision import averaging, camera as camera_model, detector, plate
-from robotenis_vision.rest import MOTION_PX, RestCorrection, STILL_FRAMES
+from robotenis_vision.rest import MOTION_PX, outline_px, RestCorrection, STILL_FRAMES
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header, String
 
@@ -44,8 +44,8 @@ PARAMETERS = {
     'method': ('conic', f"on every frame: one of {', '.join(detector.METHODS)}"),
     'rest_method': ('model', 'once the ball stands still in the image: corrects the detection '
                              "from the frames' mean image (one of the methods, or '' for never)"),
-    'rest_motion_px': (MOTION_PX, 'px: the ball stands still when its centre moves less '
-                                  'between frames'),
+    'rest_motion_px': (MOTION_PX, 'px: the ball stands still when its outline (centre and '
+                                  'radius) moves less between frames'),
     'rest_frames': (STILL_FRAMES, 'frames it must stand still for rest_method'),
     'rest_every_frame': (False, 'rest_method on every frame at rest instead of on mean images '
                                 '(10x the CPU; its bias differs on scenes it misfits: bench '
@@ -176,7 +176,8 @@ class SphereDetectorNode(Node):
         if self.use_prior and det.method != 'baseline':
             self.track = track[-1:] + ((t, det),)
         if self.rest:
-            det, failure = self.rest.update(image, det, self.camera.project(det.position))
+            det, failure = self.rest.update(
+                image, det, outline_px(self.camera, det.position, self.radius))
             if det is None:
                 self.drop(f'{self.rest_method} {failure}')
                 return

@@ -4,7 +4,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from robotenis_vision import camera as vision_camera, detector
-from robotenis_vision.rest import MeanCorrection, RestCorrection, RestSwitch
+from robotenis_vision.rest import MeanCorrection, outline_px, RestCorrection, RestSwitch
 from scipy.stats import f as f_dist
 import simple_render
 
@@ -24,6 +24,36 @@ def test_rest_after_enough_still_frames_and_again_after_a_move_or_a_lost_frame()
     assert not switch.update((100.0, 51.0))
     with pytest.raises(ValueError, match='motion_px'):
         RestSwitch(0.0, 3)
+
+
+def test_a_ball_moving_along_the_line_of_sight_is_not_at_rest():
+    """Its centre stands still in the image, its outline's radius does not."""
+    switch = RestSwitch(motion_px=0.3, frames=3)
+    # toward the camera at 0.6 m/s, a frame at 120 Hz: 5 mm a frame at 0.37 m
+    C = np.array([0.0, 0.0, 0.37]) - np.outer(np.arange(6), [0.0, 0.0, 0.005])
+    outlines = np.array([outline_px(CAM, c, R) for c in C])
+    assert np.ptp(outlines[:, :2], axis=0).max() < 1e-9            # the centre never moves
+    assert np.diff(outlines[:, 2]).min() > 0.3                     # the radius grows
+    assert not any(switch.update(o) for o in outlines)
+    assert [switch.update(outlines[-1]) for _ in range(3)] == [False, False, True]
+
+
+def test_a_new_sum_at_rest_is_fitted_from_the_fast_detection_not_the_last_fit():
+    """A ball creeping under motion_px a frame leaves its sum: the last fit is then elsewhere."""
+    seeds = []
+
+    def accurate(image, seed):
+        seeds.append(seed)
+        return replace(seed, position=seed.position + 1e-4, method='model')
+
+    rest = RestCorrection(0.3, 1, accurate, 'model')
+    image = np.zeros((4, 5), np.uint8)
+    fast = [detector.Detection(np.array([0.0, 0.0, 0.3 + 1e-4 * k]), np.eye(3) * 1e-10,
+                               np.zeros((0, 2)), 0.1, 'conic') for k in range(4)]
+    for k, det in enumerate(fast):                 # 0.2 px a frame: still, frame by frame
+        rest.update(image, det, (320.0 + 0.2 * k, 240.0, 30.0))
+    # fits at the first frame at rest (1) and at the new sum of frame 3, 0.3 px from 1 and 2
+    assert len(seeds) == 2 and seeds[0] is fast[1] and seeds[1] is fast[3]
 
 
 def test_the_mean_correction_fits_at_1_8_16_and_adds_the_accurate_less_the_fast_mean():
