@@ -16,6 +16,11 @@ calibration node records it) and the simulator's truth file it ran with, and pri
   on frames rendered at the true positions, without the robot's dynamics, the timing or ROS; the
   rests' error less the emulated, and how much of the emulated is noise (the two emulations'
   difference) and how much the detector's error at rest pose by pose (what they share);
+* the rests replayed offline with the robot's motion (study.replayed_rests on ``replay_paths``):
+  the node's step on every frame of the bag's camera stream, from the rest before to the end of
+  each rest, rendered where the truth put the ball at that frame's joint state: what the robot's
+  moves and settling add to the emulated rests (a rest taken while the ball still moved, a fit
+  seeded from a ball elsewhere), and the rests' error less the replayed;
 * the rests' first 1, 3, 10 frames averaged against the truth: where the rests' own floor stops
   more frames from helping;
 * the backlash side: the same difference when each joint's side is the one that fits best (a
@@ -24,8 +29,9 @@ calibration node records it) and the simulator's truth file it ran with, and pri
 * the bag calibrated as recorded and with each rest's detector bias taken out (what the chain
   would give with an unbiased detector): the effects claimed and the FK error against the truth
   at the session's rests (RMS, and less its common offset, which the hand camera barely sees)
-  and over boundary poses of the whole workspace; and with the two emulations' mean error taken
-  out (what the chain would give without the detector's error at rest, noise aside);
+  and over boundary poses of the whole workspace; and with the two emulations', then the two
+  replays', mean error taken out (what the chain would give without the detector's error at
+  rest, then without what the robot's motion adds to it, noise aside);
 * with RESULT, its FK error against the truth over the whole workspace.
 
 The held-out error against the truth is the loop's own held-out error (the demo's, issue 15's
@@ -46,7 +52,7 @@ from robotenis_calibration import bag_io, diagnosis, pipeline, rests, result
 from robotenis_kinematics import delta, description, effects, workspace
 from robotenis_sim import camera_model, static_session
 from robotenis_sim import truth as sim_truth
-from robotenis_validation.study import detector_bias, rest_errors
+from robotenis_validation.study import detector_bias, replayed_rests, rest_errors
 
 METHODS = ('conic', 'model')
 FIRST_FRAMES = (1, 3, 10)       # frames of each rest averaged by first_frames_error
@@ -231,6 +237,40 @@ def emulated_rests(C, radius, frames, settle=SETTLE_FRAMES, seeds=EMULATION_SEED
         return np.array([run.result() for run in runs])
 
 
+def replay_paths(rec, truth, session):
+    """
+    Return each rest's frames from a bag as study.replayed_rests takes them: paths, windows, times.
+
+    For the session's rest k: the bag's camera frames (its sphere stamps) from the end of the
+    rest before (the first: from the stream's start) to the end of rest k's window between its
+    markers, each at the ball's true centre for the joint state at that frame (its true arm
+    angles on the simulator's backlash sides, ``TrueSides``); the window's frames; their stamps.
+    """
+    windows = rests.marked_windows(rec.markers, [])
+    sides = TrueSides.of_recording(rec, truth)
+    paths, masks, times = [], [], []
+    for stamp in session.stamps:
+        k = next(i for i, (t0, t1, _) in enumerate(windows) if t0 <= stamp <= t1)
+        start = windows[k - 1][1] if k else -np.inf
+        t0, t1, _ = windows[k]
+        t = rec.t_sphere[(rec.t_sphere > start) & (rec.t_sphere <= t1)]
+        j = np.clip(np.searchsorted(rec.t_joint, t), 0, len(rec.t_joint) - 1)
+        paths.append(true_centres(truth, rec.Theta[j], sides.sides[j]))
+        masks.append(t >= t0)
+        times.append(t)
+    return paths, masks, times
+
+
+def replayed(rec, truth, session, seeds=EMULATION_SEEDS):
+    """Return the rests' errors (len(seeds), K, 3), m, replayed from a bag (``replay_paths``)."""
+    paths, masks, times = replay_paths(rec, truth, session)
+    radius = truth.geometry.sphere_radius
+    with ProcessPoolExecutor(max_workers=min(len(seeds), os.cpu_count() or 1)) as pool:
+        runs = [pool.submit(replayed_rests, paths, masks, radius, seed, times=times)
+                for seed in seeds]
+        return np.array([run.result() for run in runs])
+
+
 def split_noise(emulated):
     """
     Return the rests' noise and pose-dependent error, each (3,) std, m, from two emulations.
@@ -282,6 +322,12 @@ def main(argv=None):
     noise, pose = split_noise(emulated)
     print(f'  emulated rests: noise std {np.round(noise * 1e3, 3)} mm, the detector at rest '
           f'pose by pose {np.round(pose * 1e3, 3)} mm')
+    replay = replayed(rec, truth, session)
+    ok = np.all(np.isfinite(replay), axis=(0, 2))
+    print(_line('rests replayed with the motion (fresh noise)', replay[0][ok]))
+    print(_line('rests minus the replayed', (error - replay[0])[ok]))
+    r = [np.corrcoef(error[ok, i], replay[0][ok, i])[0, 1] for i in range(3)]
+    print(f'  correlation of the rests with the replayed, x y z: {np.round(r, 2)}')
     for n, e in first_frames_error(rec, truth, session, sides).items():
         print(_line(f'rests minus truth, their first {n} frames', e))
     e, flipped = best_sides(truth, session, sides)
@@ -291,6 +337,8 @@ def main(argv=None):
                            without_bias(session, bias['model']), truth, true_sides))
     print(calibration_line("calibrated with the emulated rests' mean error taken out",
                            without_bias(session, emulated.mean(axis=0)), truth, true_sides))
+    print(calibration_line("calibrated with the replayed rests' mean error taken out",
+                           without_bias(session, replay.mean(axis=0)), truth, true_sides))
     if args.result:
         print(f'FK of {args.result} against the truth over 500 boundary poses: '
               f'{workspace_error_mm(description.load(args.result), truth):.3f} mm '

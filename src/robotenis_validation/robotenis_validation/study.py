@@ -47,17 +47,34 @@ def rest_errors(C, radius, frames, settle, seed, camera=None, plate=True, **rend
     """
     Return the error (K, 3), m, of rests at true centres C (K, 3, optical) as the node measures.
 
-    The sphere_detector node's step on every frame, offline: each rest is ``settle`` + ``frames``
-    frames of the still ball at C[k] rendered by the hand camera's renderer with fresh noise
-    (``seed``; ``render_options`` of camera_model.render), each measured by the conic method
-    seeded by the frame before and corrected at rest by the model fit on mean images
-    (rest.RestCorrection with the node's defaults), the fit's background plate (``plate``) built
-    from the rests before, in the order of C (the node's outline RMS check, which a still ball's
-    detections pass, is left out). A row is the mean of the ``frames`` positions published after
-    the settle, less C[k]: what a session averages at that rest; NaN where one of those frames was
-    not published.
-    Unlike detector_bias, it carries the frames' noise and the fit's bias on mean images of
-    noisy frames, which may differ from its bias on a noise-free render.
+    Each rest is ``settle`` + ``frames`` frames of the still ball at C[k], the robot moving on
+    between rests (``replayed_rests`` without times: each rest found by a search); a row is the
+    mean of the ``frames`` positions published after the settle, less C[k]: what a session
+    averages at that rest. Unlike detector_bias, it carries the frames' noise and the fit's bias
+    on mean images of noisy frames, which may differ from its bias on a noise-free render.
+    """
+    C = np.asarray(C, dtype=float)
+    window = np.arange(settle + frames) >= settle
+    return replayed_rests([np.tile(c, (settle + frames, 1)) for c in C], [window] * len(C),
+                          radius, seed, camera, plate, **render_options)
+
+
+def replayed_rests(paths, windows, radius, seed, camera=None, plate=True, times=None,
+                   **render_options):
+    """
+    Return the error (K, 3), m, of rests as the sphere_detector node measures them, frame by frame.
+
+    ``paths``: for each rest, the ball's true centres (n_k, 3, optical) in the frames the camera
+    took on the way to it and at it; ``windows``: (n_k,) booleans, the frames a session averages
+    there. Each frame is rendered by the hand camera's renderer with fresh noise (``seed``;
+    ``render_options`` of camera_model.render) and measured by the node's step, offline: the
+    conic method seeded by the frames before (detector.moved_prior), corrected at rest by the
+    model fit on mean images (rest.RestCorrection with the node's defaults), the fit's
+    background plate (``plate``) built from the rests before, in order (the node's outline RMS
+    check, which a still ball's detections pass, is left out). ``times``: each path's frame times
+    (s), the frames of one continuous stream, as a session's camera took them; None: each rest
+    alone, found by a search at its first frame. A row is the mean of the window's published
+    positions less the true ones; NaN where one of those frames was not published.
     """
     camera = camera or vision_camera.default()
     rng = np.random.default_rng(seed)
@@ -71,23 +88,29 @@ def rest_errors(C, radius, frames, settle, seed, camera=None, plate=True, **rend
         behind.add_ball(image, camera, det.position, radius, noise)
 
     rest = RestCorrection(MOTION_PX, STILL_FRAMES, accurate, 'model', seen=seen if plate else None)
-    out = np.full((len(C), 3), np.nan)
-    for k, c in enumerate(np.asarray(C, dtype=float)):
-        prior, published = None, []
-        for j in range(settle + frames):
+    out = np.full((len(paths), 3), np.nan)
+    track = ()
+    for k, (path, window) in enumerate(zip(paths, windows)):
+        if times is None:
+            rest.lost()                 # the robot moved on: the next rest starts afresh
+            track = ()
+        stamps = np.arange(len(path)) if times is None else times[k]
+        published = []
+        for c, t, averaged in zip(np.asarray(path, dtype=float), stamps, window):
             image = camera_model.render(camera, c, radius, rng, **render_options)
             try:
-                prior = detector.detect(image, camera, radius, 'conic', prior)
+                det = detector.detect(image, camera, radius, 'conic',
+                                      detector.moved_prior(camera, track, t) if track else None)
             except detector.DetectionError:
                 rest.lost()
-                prior = None
+                track = ()
                 continue
-            det, _ = rest.update(image, prior, outline_px(camera, prior.position, radius))
-            if j >= settle and det is not None:
-                published.append(det.position)
-        rest.lost()                     # the robot moves on to the next pose
-        if len(published) == frames:
-            out[k] = np.mean(published, axis=0) - c
+            track = track[-1:] + ((t, det),)
+            det, _ = rest.update(image, det, outline_px(camera, det.position, radius))
+            if averaged and det is not None:
+                published.append(det.position - c)
+        if published and len(published) == np.count_nonzero(window):
+            out[k] = np.mean(published, axis=0)
     return out
 
 

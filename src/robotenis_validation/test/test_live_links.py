@@ -63,6 +63,29 @@ def test_emulated_rests_without_noise_are_the_noise_free_bias():
     assert np.all(np.isfinite(noisy)) and not np.allclose(*noisy)       # fresh noise each seed
 
 
+def test_a_rest_reached_along_the_line_of_sight_is_measured_as_a_still_one():
+    """
+    replayed_rests through a move toward the camera, then at rest: as rest_errors at that pose.
+
+    The ball's image centre stays put through the move (its radius grows 0.4 px a frame): a
+    rest judged by the centre alone averaged and fitted the moving frames (a demo rest 1.2 mm off
+    in depth). The two differ by noise: the window's mean of frames, each with the conic's
+    depth standard deviation from its covariance, independently drawn in each.
+    """
+    camera, R = vision_camera.default(), 0.019
+    c = np.array([0.03, -0.02, 0.37])
+    move = c * (1 + 0.0135 * np.arange(20, 0, -1))[:, None]          # 5 mm a frame, then still
+    path = np.vstack([move, np.tile(c, (44, 1))])
+    window = np.arange(len(path)) >= 40
+    replayed = study.replayed_rests([path], [window], R, 1, plate=False,
+                                    times=[np.arange(len(path)) / 120.0])[0]
+    still = study.rest_errors(c[None], R, 24, 20, 2, plate=False)[0]
+    det = detector.detect(camera_model.render(camera, c, R, np.random.default_rng(3)), camera, R,
+                          'conic')
+    sd = np.sqrt(np.diag(det.covariance) * 2 / np.count_nonzero(window))
+    assert np.all(np.abs(replayed - still) < 4 * sd), (replayed - still) / sd
+
+
 def test_two_emulations_split_into_their_noise_and_what_they_share():
     """split_noise recovers a shared error and independent noise of known spreads."""
     rng = np.random.default_rng(4)
