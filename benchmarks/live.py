@@ -17,8 +17,8 @@ user of the whole workspace gets. Each session takes about 2 minutes of wall tim
 
 Beside it, per effect, the links measured apart (``live_links``), in seconds rather than minutes:
 the same number of poses measured through the noise model alone, and through rendered images
-without the dynamics (each rest carries the detector's bias at its true pose, from a render
-without sensor noise: ``study.static_run(images=...)``), with the ball planned within 0.55 m
+without the dynamics (each rest measured as the sphere_detector node measures it, emulated
+offline at its true pose: ``study.static_run(images=True)``), with the ball planned within 0.55 m
 (``poses.PLAN_RANGE``) and within 0.40 m (``poses.IMAGE_MAX_RANGE``, where the calibration node
 plans); and the live bag calibrated again with the detector's error at each rest taken out (as
 emulated offline: ``live_links.emulated_rests``). Errors at the rests are given as RMS and less
@@ -83,7 +83,7 @@ def links(robot, args):
     # less the camera offset the planner leaves out); so does this one
     seen = -np.asarray(robot.camera_translation, dtype=float)
     for far in (poses.PLAN_RANGE[1], poses.IMAGE_MAX_RANGE):
-        for label, images in (('noise model only', None), ('images, no dynamics', 'model')):
+        for label, images in (('noise model only', False), ('images, no dynamics', True)):
             session, meas, d = study.static_run(robot, description.nominal(), args.poses,
                                                 args.seed, args.selection, seen, images, far)
             out.append(scored(f'{label}, <= {far} m ({len(session)})', d, meas, session,

@@ -52,11 +52,10 @@ from robotenis_calibration import bag_io, diagnosis, pipeline, rests, result
 from robotenis_kinematics import delta, description, effects, workspace
 from robotenis_sim import camera_model, static_session
 from robotenis_sim import truth as sim_truth
-from robotenis_validation.study import detector_bias, replayed_rests, rest_errors
+from robotenis_validation.study import detector_bias, replayed_rests, rest_errors, SETTLE_FRAMES
 
 METHODS = ('conic', 'model')
 FIRST_FRAMES = (1, 3, 10)       # frames of each rest averaged by first_frames_error
-SETTLE_FRAMES = 12              # frames at rest before a rest's average: the demo's 0.1 s, 120 Hz
 EMULATION_SEEDS = (1, 2)        # two emulations of the rests: their difference is the noise
 # the renderer's defaults, one at a time, that the model method's bias comes from
 BIAS_SOURCES = {'no specular highlight': {'lighting': camera_model.Lighting(specular=0.0)},

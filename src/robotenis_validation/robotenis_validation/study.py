@@ -10,6 +10,9 @@ from robotenis_vision import detector
 from robotenis_vision.plate import BackgroundPlate, NOISE_FLOOR
 from robotenis_vision.rest import MOTION_PX, outline_px, RestCorrection, STILL_FRAMES
 
+REST_FRAMES = 12                # frames a session averages at a rest: the demo's
+SETTLE_FRAMES = 12              # frames at rest before them: the demo's 0.1 s at 120 Hz
+
 
 def detector_bias(C, radius, method='model', camera=None, plate=True, **render_options):
     """
@@ -43,7 +46,8 @@ def detector_bias(C, radius, method='model', camera=None, plate=True, **render_o
     return out
 
 
-def rest_errors(C, radius, frames, settle, seed, camera=None, plate=True, **render_options):
+def rest_errors(C, radius, frames=REST_FRAMES, settle=SETTLE_FRAMES, seed=0, camera=None,
+                plate=True, **render_options):
     """
     Return the error (K, 3), m, of rests at true centres C (K, 3, optical) as the node measures.
 
@@ -120,10 +124,13 @@ def static_run(truth, declared, n, seed, selection='boundary', guess_error=BALL_
     Run a static session of ``n`` planned poses on ``truth`` and the residual loop on it.
 
     Returns (session, measurements, diagnosis). The planner knows only the declared description
-    and a guess of the ball position that is off by ``guess_error`` (m). ``images``: a detector
-    method; each rest then also carries the detector's bias at its true pose (detector_bias), as
-    a session through rendered images would without its dynamics, and rests whose image the
-    detector refuses are dropped. ``max_range``: the farthest the ball is planned (m).
+    and a guess of the ball position that is off by ``guess_error`` (m). ``images``: each rest's
+    camera reading is then the truth's plus the error of the rest measured through rendered
+    images as the sphere_detector node measures it (rest_errors: its frames' noise and the
+    detector's error at rest, the robot's dynamics aside), in place of the noise model's, and
+    rests the detector refuses are dropped; the rests keep the noise model's covariances (the
+    calibration learns the floor beyond them). ``max_range``: the farthest the ball is planned
+    (m).
     """
     rng = np.random.default_rng(seed)
     P = poses.select(selection, declared, truth.sphere_position + guess_error, n, rng, max_range)
@@ -132,9 +139,10 @@ def static_run(truth, declared, n, seed, selection='boundary', guess_error=BALL_
     if images:
         C = static_session.sphere_in_camera(truth, static_session.rest_positions(
             truth, declared, P[kept])[1])
-        bias = detector_bias(C, truth.geometry.sphere_radius, images)
-        ok = np.all(np.isfinite(bias), axis=1)
-        Theta, sigma, sphere, cov = Theta[ok], sigma[ok], sphere[ok] + bias[ok], cov[ok]
+        error = rest_errors(C, truth.geometry.sphere_radius, seed=seed)
+        ok = np.all(np.isfinite(error), axis=1)
+        Theta, sigma, cov = Theta[ok], sigma[ok], cov[ok]
+        sphere = truth.camera_reading(C[ok]) + error[ok]
     s = Session(declared, Theta, sigma, sphere, cov, 8.0 * np.arange(len(Theta)))
     meas = s.measurements()
     return s, meas, diagnosis.run(declared, meas, s.sphere, s.stamps, seed=seed)

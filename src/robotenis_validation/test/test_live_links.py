@@ -166,7 +166,7 @@ def test_effects_the_poses_cannot_tell_apart_are_reported_together():
     the other beside it (neither adds to the other), never silently drops the truth's.
     """
     robot = sim_truth.with_effects(sim_truth.load(), **scenarios.EFFECTS['hand_eye_rotation'])
-    _, _, d = study.static_run(robot, description.nominal(), 90, 2, images='model',
+    _, _, d = study.static_run(robot, description.nominal(), 90, 2, images=True,
                                max_range=0.4)
     claimed = d.effects + [n for names in d.indistinguishable.values() for n in names]
     assert 'hand_eye_rotation' in claimed
