@@ -34,6 +34,9 @@ SIDE_ROUNDS = 5  # at most: loops on new backlash sides, sweeps of their choice
 # machine precision in 9-13, and after 5 their chi2 was within 1e-4 of it (a live backlash bag,
 # 30 candidate gaps, chi2 72-410 over them): the choice is the same, at half the steps.
 PROFILE_ITERATIONS = 5
+# a gap rule's gap within this ratio of the fitted width, where tied rules are chosen among: the
+# width fitted on a gap's sides comes out short of the play when those sides are wrong
+GAP_RATIO = 2.0
 
 
 class CalibrationError(RuntimeError):
@@ -173,10 +176,27 @@ def backlash_gaps(session, d):
             break
     train = session.approach[d.train]
     grids = [grid for grid in (session.gaps, session.speeds) if grid is not None]
+    width = np.abs(final.model.effects['backlash'])
     for j in range(3):
         same = np.all(train[:, :, j] == train[:, pick[j], j][:, None], axis=0)
-        pick[j] = widest_run(same, grids)
+        near = same & near_width(session.gaps, len(same), width[j])
+        pick[j] = widest_run(near if near.any() else same, grids)
     return pick
+
+
+def near_width(gaps, n_rules, width, ratio=GAP_RATIO):
+    """
+    Return which of ``n_rules`` rules (gaps (G,) rad, then the other family's) a play allows.
+
+    A play of the fitted ``width`` turns the arm over on a return of that width: a gap rule more
+    than ``ratio`` times off it contradicts the width the same fit finds (a return of 3.4 mrad
+    to turn over a 0.8 mrad play), however it ties on the training rests. Rules of the other
+    family are all allowed. Where only such gaps tie, they are used (``backlash_gaps``): a
+    gap's training sides may have pulled the width short.
+    """
+    allowed = np.ones(n_rules, dtype=bool)
+    allowed[:len(gaps)] = np.abs(np.log(np.asarray(gaps) / width)) <= np.log(ratio)
+    return allowed
 
 
 def widest_run(same, grids):

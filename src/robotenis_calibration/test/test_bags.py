@@ -357,6 +357,25 @@ def test_of_rules_that_tie_the_middle_of_the_widest_run_is_taken():
     assert pipeline.widest_run(same, [gaps, speeds]) == 4
 
 
+def test_gaps_far_from_the_fitted_width_are_not_chosen_among_tied_rules():
+    """
+    near_width: of rules that tie on the training rests, a gap 2x off the play's width is not one.
+
+    A demo bag's joint 2 (play 0.8 mrad, fitted 0.80): its training rests tied gaps 0.75-0.91
+    mrad, 1.2-14 mrad and speeds 0.12-0.73 rad/s; the widest run, the far gaps, put a held-out
+    rest on the wrong side.
+    """
+    gaps, speeds = rests.GAPS, rests.SPEEDS
+    same = np.zeros(len(gaps) + len(speeds), dtype=bool)
+    same[27:32] = True                                  # gaps 0.75-0.91 mrad
+    same[36:88] = True                                  # gaps 1.2-14 mrad
+    same[len(gaps) + 4:len(gaps) + 13] = True           # speeds 0.12-0.73 rad/s
+    assert gaps[pipeline.widest_run(same, [gaps, speeds])] > 3e-3
+    near = pipeline.near_width(gaps, len(same), 0.8e-3)
+    assert np.all(gaps[near[:len(gaps)]] <= 1.6e-3) and near[len(gaps):].all()
+    assert pipeline.widest_run(same & near, [gaps, speeds]) == len(gaps) + 8    # 0.298 rad/s
+
+
 def test_joint_states_serialized_by_rclpy_are_read(tmp_path):
     """Accept rclpy's JointState bytes, which have no padding before an empty effort sequence."""
     from rclpy.serialization import serialize_message
