@@ -10,7 +10,7 @@ tests are calibrated twice: from rests measured through the noise model, and thr
 images and the product's detector as the live session measures them (the paper's own chain,
 which the figures set beside the paper's come from). ``--session`` adds the calibration of a
 recorded bag.
-``--quick`` uses fewer poses and seeds (for CI: under 3 minutes).
+``--quick`` uses fewer poses and seeds (for CI: about 7 minutes here).
 """
 import argparse
 from concurrent.futures import ProcessPoolExecutor

@@ -98,6 +98,7 @@ def replayed_rests(paths, windows, radius, seed, camera=None, plate=True, times=
         if times is None:
             rest.lost()                 # the robot moved on: the next rest starts afresh
             track = ()
+        # without times, frame numbers: a still ball's prior is not moved (detector.TRACK_GAP)
         stamps = np.arange(len(path)) if times is None else times[k]
         published = []
         for c, t, averaged in zip(np.asarray(path, dtype=float), stamps, window):

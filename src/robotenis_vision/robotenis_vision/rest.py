@@ -30,8 +30,9 @@ camera response gamma != 1 the mean of encoded grey levels is fitted, a second-o
 The outline, not only its centre, must stand still (``outline_px``: its centre and apparent
 radius): a ball moving along the line of sight keeps its centre while its radius changes. Judged
 by the centre alone, the last rest of a demo session (a move toward the camera at 0.37 m) was
-taken as at rest in mid-move; its first fit started 40 mm off in depth, and each fit started from
-the one before walked back only part of the way: the rest came out 1.2 mm off.
+taken as at rest in mid-move: its mean images mixed the ball at several depths, and its fits read
+10.4 mm off in depth on the first frame (seeded by the last fit, 40 mm away), then 3.5, 2.1 and
+1.2 mm on 8, 16 and 32 frames; the rest came out 1.2 mm off.
 
 The fits at 2 and 4 frames are skipped: they would only correct frames 2-7 of a rest, which a
 session lets go by while it settles (the demo's 0.3 s settle is 36 frames at 120 Hz). On the 16
@@ -63,19 +64,20 @@ class RestSwitch:
             raise ValueError('rest: motion_px must be positive and frames at least 1, '
                              f'got {motion_px!r}, {frames!r}')
         self.motion_px, self.frames = float(motion_px), int(frames)
-        self.still, self.last_px = 0, None
+        self.still, self.last_outline = 0, None
 
-    def update(self, px):
+    def update(self, outline):
         """Record the ball's outline (``outline_px``) in a new frame; return whether it rests."""
-        px = np.asarray(px, dtype=float)
-        moved = np.inf if self.last_px is None else float(np.linalg.norm(px - self.last_px))
-        self.last_px = px
+        outline = np.asarray(outline, dtype=float)
+        moved = (np.inf if self.last_outline is None
+                 else float(np.linalg.norm(outline - self.last_outline)))
+        self.last_outline = outline
         self.still = self.still + 1 if moved < self.motion_px else 0
         return self.still >= self.frames
 
     def lost(self):
         """Record a frame without a detection: the count starts again."""
-        self.still, self.last_px = 0, None
+        self.still, self.last_outline = 0, None
 
 
 class MeanCorrection:
@@ -97,29 +99,29 @@ class MeanCorrection:
     def restart(self):
         """Start a new sum (the correction of the last fit stays until the next fit)."""
         self.sum, self.n = None, 0
-        self.fast_sum, self.px_sum = np.zeros(3), 0.0
+        self.fast_sum, self.outline_sum = np.zeros(3), 0.0
 
     def reset(self):
         """Forget the sum and the correction: the ball moved or was lost."""
         self.restart()
         self.delta = None
 
-    def add(self, image, fast_position, px):
+    def add(self, image, fast_position, outline):
         """
-        Add a frame (mono image) and its fast detection (m, optical; px its ``outline_px``).
+        Add a frame (mono image) and its fast detection (m, optical; its ``outline_px``).
 
         Return True when the accurate method is due: the first frame, and a power of two of
         frames summed from FIRST_MEAN on.
         """
-        px = np.asarray(px, dtype=float)
-        if self.n and np.linalg.norm(px - self.px_sum / self.n) > self.motion_px:
+        outline = np.asarray(outline, dtype=float)
+        if self.n and np.linalg.norm(outline - self.outline_sum / self.n) > self.motion_px:
             self.restart()
         if self.sum is None:
             self.sum = np.zeros(np.shape(image), dtype=np.float32)
         np.add(self.sum, image, out=self.sum)
         self.n += 1
         self.fast_sum += fast_position
-        self.px_sum = self.px_sum + px
+        self.outline_sum = self.outline_sum + outline
         return self.n == 1 or (self.n >= FIRST_MEAN and self.n & (self.n - 1) == 0)
 
     def mean_image(self):
@@ -173,11 +175,11 @@ class RestCorrection:
         self.switch.lost()
         self.ended()
 
-    def update(self, image, det, px):
+    def update(self, image, det, outline):
         """
-        Return the Detection to publish for a frame, from its fast Detection det and outline px.
+        Return the Detection to publish for a frame, from its fast Detection det and its outline.
 
-        ``px``: det's ``outline_px``. Or None: the frame is dropped. And the accurate method's
+        ``outline``: det's ``outline_px``. Or None: the frame is dropped. And the accurate method's
         failure on this frame (a message) or None. The accurate method starts from its own last
         detection while the ball stays still and its frames' sum goes on, else from det. On mean
         images, if it fails the last correction stays; every frame (``every_frame``), its failure
@@ -187,7 +189,7 @@ class RestCorrection:
         benchmarks/vision.py, seed 37, a rest whose every fit refused the conic's ball would have
         published it, 0.4 m off, for the whole rest).
         """
-        if not self.switch.update(px):
+        if not self.switch.update(outline):
             self.ended()
             return det, None
         if self.every_frame:
@@ -198,7 +200,7 @@ class RestCorrection:
                 self.last = None
                 return None, f'at rest: {e}'
         failure = None
-        if self.mean.add(image, det.position, px):
+        if self.mean.add(image, det.position, outline):
             seed = det if self.mean.n == 1 else self.last or det    # a new sum: the ball moved
             try:
                 self.last = self.accurate(self.mean.mean_image(), seed)
