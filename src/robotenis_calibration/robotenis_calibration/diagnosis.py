@@ -156,13 +156,32 @@ class Diagnosis:
         own covariance (identification.fk_covariance): how far from the poses it measured the
         calibration can be trusted, which needs no truth. A session whose poses cover little of
         the workspace, or whose rests err by more than their frames show, reads large here
-        however small its held-out error.
+        however small its held-out error. Returns (rms, largest, poses): poses where the final
+        model cannot assemble the robot (its joint effects, extrapolated to the boundary, put the
+        arms where the forearms do not meet) are left out of both; with none left, inf.
         """
         desc = self.final.model.desc
         P = workspace.boundary_poses(desc, WORKSPACE_POSES, np.random.default_rng(0))
-        C = idf.fk_covariance(self.final, delta.inverse(desc, P) - desc.theta0)
+        Theta = delta.inverse(desc, P) - desc.theta0
+        C = assembled_fk_covariance(self.final, Theta, effects.motion_direction(Theta))
+        if not len(C):
+            return np.inf, np.inf, 0
         sd = np.sqrt(np.trace(C, axis1=1, axis2=2))
-        return float(np.sqrt(np.mean(sd ** 2)) * 1e3), float(sd.max() * 1e3)
+        return float(np.sqrt(np.mean(sd ** 2)) * 1e3), float(sd.max() * 1e3), len(C)
+
+
+def assembled_fk_covariance(result, Theta, direction):
+    """Return identification.fk_covariance (n, 3, 3) at the poses the fit's model assembles."""
+    try:
+        return idf.fk_covariance(result, Theta, direction)
+    except ValueError:              # some poses it cannot assemble: each of the others alone
+        out = []
+        for k in range(len(Theta)):
+            try:
+                out.append(idf.fk_covariance(result, Theta[k:k + 1], direction[k:k + 1])[0])
+            except ValueError:
+                continue
+        return np.reshape(out, (-1, 3, 3))
 
 
 def with_candidate(model, name, size=None):

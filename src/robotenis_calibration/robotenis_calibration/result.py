@@ -89,11 +89,11 @@ def report(diagnosis):
             'generic_adds_p': step.generic_p_value,
             'equivalent': [{'name': n, 'adds_p': a, 'gains_p': g} for n, a, g in step.equivalent],
         })
-    rms, largest = diagnosis.workspace_fk_std_mm
+    rms, largest, poses = diagnosis.workspace_fk_std_mm
     return {
         'poses': {'train': int(len(diagnosis.train)), 'holdout': int(len(diagnosis.holdout))},
         'holdout_rms_error_mm': dict(diagnosis.errors_mm),
-        'workspace_fk_std_mm': {'rms': rms, 'largest': largest, 'poses': dg.WORKSPACE_POSES},
+        'workspace_fk_std_mm': {'rms': rms, 'largest': largest, 'poses': poses},
         'holdout_chi2': dict(diagnosis.holdout_chi2),
         'holdout_test': dict(diagnosis.size_test),
         'noise_floor': diagnosis.floor.as_dict() if diagnosis.floor else None,
@@ -136,9 +136,11 @@ def summary(diagnosis):
                           for t in step.tests)
         lines.append(f'  score tests: {tests}')
         lines.append(f'    -> {step.chosen}: {step.reason}')
-    rms, largest = diagnosis.workspace_fk_std_mm
+    rms, largest, poses = diagnosis.workspace_fk_std_mm
+    lost = ('' if poses == dg.WORKSPACE_POSES else f' of {dg.WORKSPACE_POSES}; the model cannot '
+            'assemble the robot at the others')
     lines.append(f'FK standard deviation over the workspace, from the fit: {rms:.3f} mm RMS, '
-                 f'{largest:.3f} mm at most ({dg.WORKSPACE_POSES} boundary poses)')
+                 f'{largest:.3f} mm at most ({poses} boundary poses{lost})')
     size = diagnosis.size_test
     lines.append(f"held-out poses: chi2 {size['chi2']:.1f} for {size['dof']} dof"
                  f" (p = {size['p_value']:.3g}) under the final model and the rests' floor")

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from robotenis_calibration import diagnosis, poses, result
 from robotenis_calibration.session import Session
-from robotenis_kinematics import delta, description, effects, synthetic, variance
+from robotenis_kinematics import delta, description, effects, synthetic, variance, workspace
 from robotenis_kinematics import identification as idf
 from robotenis_sim import static_session
 from robotenis_sim import truth as sim_truth
@@ -245,3 +245,32 @@ def test_a_named_effect_no_rival_explains_better_is_attributed_once():
     step = types.SimpleNamespace(reason=None, chosen=None)
     assert diagnosis._Loop.claim_named(loop, step, best, 'fit', [], [])[0] == 'backlash'
     assert loop.attributed == ['backlash']
+
+
+def test_the_workspace_fk_leaves_out_the_poses_the_model_cannot_assemble():
+    """
+    assembled_fk_covariance: a model whose joint effects pull the forearms apart at some poses.
+
+    A generic effect extrapolated to the workspace's boundary can do this; the FK's standard
+    deviation is then given over the poses the model assembles, not refused as a whole.
+    """
+    desc = description.nominal()
+    P = workspace.boundary_poses(desc, 40, np.random.default_rng(0))
+    Theta = delta.inverse(desc, P) - desc.theta0
+    direction = effects.motion_direction(Theta)
+    model = idf.Model(desc, np.zeros(3), {'joint_scale': np.array([0.6, -0.6, 0.0])})
+    fit = idf.Result(model, ('a1', 'joint_scale1'), np.zeros(2), np.eye(2) * 1e-8, 0.0, 0, 0,
+                     True)
+    assembles = []
+    for k in range(len(Theta)):
+        try:
+            idf.predicted_positions(model, Theta[k:k + 1], direction[k:k + 1])
+            assembles.append(k)
+        except ValueError:
+            pass
+    assert 0 < len(assembles) < len(Theta)
+    with pytest.raises(ValueError, match='do not meet'):
+        idf.fk_covariance(fit, Theta, direction)
+    C = diagnosis.assembled_fk_covariance(fit, Theta, direction)
+    np.testing.assert_allclose(
+        C, idf.fk_covariance(fit, Theta[assembles], direction[assembles]), rtol=1e-9)
