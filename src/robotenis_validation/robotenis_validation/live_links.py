@@ -119,10 +119,18 @@ def best_sides(truth, session, sides):
 
 
 def workspace_error_mm(desc, truth, n=500, seed=900):
-    """Return the RMS 3D error (mm) of a description's FK, as ``fk`` applies it, workspace-wide."""
+    """
+    Return the RMS 3D error (mm) of a description's FK, as ``fk`` applies it, workspace-wide.
+
+    inf when the description cannot assemble the robot at one of the poses (its joint effects
+    pull the forearms apart there): ``fk`` fails where the robot still goes.
+    """
     P_cmd = workspace.boundary_poses(description.nominal(), n, np.random.default_rng(seed))
     Theta, P_true = static_session.rest_positions(truth, description.nominal(), P_cmd)
-    P = delta.forward(desc, effects.joint_angles(desc, Theta))
+    try:
+        P = delta.forward(desc, effects.joint_angles(desc, Theta))
+    except ValueError:
+        return np.inf
     return float(np.sqrt(np.mean(np.sum((P - P_true) ** 2, axis=1))) * 1e3)
 
 

@@ -172,3 +172,11 @@ def test_effects_the_poses_cannot_tell_apart_are_reported_together():
     assert 'hand_eye_rotation' in claimed
     assert d.indistinguishable and all(
         step.equivalent for step in d.steps if step.chosen in d.indistinguishable)
+
+
+def test_a_description_that_cannot_assemble_the_robot_somewhere_scores_inf():
+    """workspace_error_mm: FK that fails at a pose where the robot goes is no finite error."""
+    truth, nominal = sim_truth.load(), description.nominal()
+    broken = nominal.copy(effects=[{'name': 'joint_scale', 'scale': [0.6, -0.6, 0.0]}])
+    assert np.isfinite(live_links.workspace_error_mm(nominal, truth, n=60))
+    assert live_links.workspace_error_mm(broken, truth, n=60) == np.inf
