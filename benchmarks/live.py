@@ -21,8 +21,10 @@ without the dynamics (each rest measured as the sphere_detector node measures it
 offline at its true pose: ``study.static_run(images=True)``), with the ball planned within 0.55 m
 (``poses.PLAN_RANGE``) and within 0.40 m (``poses.IMAGE_MAX_RANGE``, where the calibration node
 plans); and the live bag calibrated again with the detector's error at each rest taken out (as
-emulated offline: ``live_links.emulated_rests``). Errors at the rests are given as RMS and less
-their common offset.
+emulated offline: ``live_links.emulated_rests``); and the live poses' rests made of the truth, the
+emulations' noise and 1, 0.5 and 0 of the detector's error at rest that depends on the pose
+(``live_links.scaled_rests``): how small that error must be for the 3x target. Errors at the
+rests are given as RMS and less their common offset.
 ``--images-only`` skips the sessions through ROS.
 """
 import argparse
@@ -98,7 +100,8 @@ def live_bag(bag, robot, seed):
     Calibrated again as the service did, as recorded and with the detector's error at each rest
     taken out: the mean of two emulations of the node's rests at the true poses with fresh noise
     (live_links.emulated_rests; what the chain would give with a detector exact at rest, but
-    for noise: the rests' own and half an emulation's).
+    for noise: the rests' own and half an emulation's); and the rests made of the truth and of
+    those emulations with the detector's error at rest scaled (live_links.scaled_rests).
     """
     session, d, meas = live_links.calibrated_as_the_service(bag, seed)
     true_sides = live_links.TrueSides.of_bag(bag, robot)
@@ -112,7 +115,14 @@ def live_bag(bag, robot, seed):
     d_out, meas_out = pipeline.calibrate_session(unbiased, pipeline.Settings(seed=seed))
     out = scored(f'live bag, detector at rest out ({len(unbiased)})', d_out, meas_out, unbiased,
                  robot, true_sides.at(unbiased.stamps))[0]
-    return [line, out], list(d.effects), errors
+    true = live_links.true_sphere(robot, session.Theta, sides)
+    shares = []
+    for share in live_links.POSE_SHARES:
+        made = live_links.scaled_rests(session, true, emulated, share)
+        d_s, meas_s = pipeline.calibrate_session(made, pipeline.Settings(seed=seed))
+        shares.append(scored(f"emulated, detector's pose error x{share:g}", d_s, meas_s, made,
+                             robot, true_sides.at(made.stamps))[0])
+    return [line, out, *shares], list(d.effects), errors
 
 
 def live_session(effect, folder, args):
@@ -162,7 +172,7 @@ def main():
             if again != claimed:
                 lines[0] += f' (the service claimed {", ".join(claimed) or "nothing"})'
             apart += lines
-            print('\n'.join(apart[-2:]), flush=True)
+            print('\n'.join(apart[-len(lines):]), flush=True)
             rows.append((effect, ', '.join(claimed) or 'none', live, static, wall,
                          verdict(EXPECTED[effect], claimed, live[0], static[0],
                                  desc.report.get('indistinguishable'))))

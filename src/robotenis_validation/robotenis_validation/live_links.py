@@ -15,7 +15,9 @@ calibration node records it) and the simulator's truth file it ran with, and pri
 * the rests emulated offline (study.rest_errors, twice with fresh noise): the node's own step
   on frames rendered at the true positions, without the robot's dynamics, the timing or ROS; the
   rests' error less the emulated, and how much of the emulated is noise (the two emulations'
-  difference) and how much the detector's error at rest pose by pose (what they share);
+  difference) and how much the detector's error at rest pose by pose (what they share); and
+  the rests made of the truth, the emulations' noise and a share of what they share
+  (``scaled_rests``: 1, 0.5, 0), calibrated: how small that error must be for a target;
 * the rests replayed offline with the robot's motion (study.replayed_rests on ``replay_paths``):
   the node's step on every frame of the bag's camera stream, from the rest before to the end of
   each rest, rendered where the truth put the ball at that frame's joint state: what the robot's
@@ -57,6 +59,8 @@ from robotenis_validation.study import detector_bias, replayed_rests, rest_error
 METHODS = ('conic', 'model')
 FIRST_FRAMES = (1, 3, 10)       # frames of each rest averaged by first_frames_error
 EMULATION_SEEDS = (1, 2)        # two emulations of the rests: their difference is the noise
+# scaled_rests: shares of the detector's error at rest, pose by pose, a calibration is tried with
+POSE_SHARES = (1.0, 0.5, 0.0)
 # the renderer's defaults, one at a time, that the model method's bias comes from
 BIAS_SOURCES = {'no specular highlight': {'lighting': camera_model.Lighting(specular=0.0)},
                 'no lens blur': {'blur_sigma': 0.0}}
@@ -292,6 +296,25 @@ def split_noise(emulated):
     return np.sqrt(noise2), np.sqrt(np.maximum(shared, 0.0))
 
 
+def scaled_rests(session, true, emulated, share):
+    """
+    Return the session with readings the truth's plus emulated noise and ``share`` of its error.
+
+    ``true`` (K, 3): where the truth's camera measures the ball at each rest (true_sphere);
+    ``emulated`` (2, K, 3): two emulations of the rests with fresh noise (emulated_rests). Each
+    rest reads true + share (e1 + e2) / 2 + (e1 - e2) / sqrt(2): the detector's error at rest
+    pose by pose scaled by ``share`` (their mean, which keeps half an emulation's noise), and one
+    emulation's noise (their difference). What a calibration would give with a detector whose
+    error at rest that depends on the pose were ``share`` of this one's. Rests an emulation
+    refused (NaN) are dropped.
+    """
+    e1, e2 = emulated[:2]
+    ok = np.flatnonzero(np.all(np.isfinite(e1) & np.isfinite(e2), axis=1))
+    kept = session.subset(ok)
+    error = share * (e1[ok] + e2[ok]) / 2 + (e1[ok] - e2[ok]) / np.sqrt(2)
+    return dataclasses.replace(kept, sphere=true[ok] + error)
+
+
 def _line(label, e):
     return (f'{label:46s} mean {np.round(e.mean(axis=0) * 1e3, 3)} std '
             f'{np.round(e.std(axis=0) * 1e3, 3)} mm ({len(e)})')
@@ -329,6 +352,11 @@ def main(argv=None):
     noise, pose = split_noise(emulated)
     print(f'  emulated rests: noise std {np.round(noise * 1e3, 3)} mm, the detector at rest '
           f'pose by pose {np.round(pose * 1e3, 3)} mm')
+    for share in POSE_SHARES:
+        print(calibration_line(f"emulated rests, the detector's error at rest x{share:g} (its "
+                               'noise kept)', scaled_rests(session, true_sphere(
+                                   truth, session.Theta, sides), emulated, share),
+                               truth, true_sides))
     replay = replayed(rec, truth, session)
     ok = np.all(np.isfinite(replay), axis=(0, 2))
     print(_line('rests replayed with the motion (fresh noise)', replay[0][ok]))

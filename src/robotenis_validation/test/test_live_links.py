@@ -180,3 +180,21 @@ def test_a_description_that_cannot_assemble_the_robot_somewhere_scores_inf():
     broken = nominal.copy(effects=[{'name': 'joint_scale', 'scale': [0.6, -0.6, 0.0]}])
     assert np.isfinite(live_links.workspace_error_mm(nominal, truth, n=60))
     assert live_links.workspace_error_mm(broken, truth, n=60) == np.inf
+
+
+def test_scaled_rests_keep_the_noise_and_scale_what_the_emulations_share(tmp_path):
+    """scaled_rests: true + share x the emulations' mean + their difference / sqrt 2."""
+    bag = session_bag.write(tmp_path / 'bag', session_bag.BagSpec(poses=20, seed=7))
+    session, _ = rests.load_session(bag.path)
+    rng = np.random.default_rng(2)
+    true = session.sphere + rng.normal(scale=1e-5, size=session.sphere.shape)
+    shared = rng.normal(scale=6e-5, size=(len(session), 3))
+    noise = rng.normal(scale=4e-5, size=(2, len(session), 3))
+    emulated = shared + noise
+    emulated[1, 5] = np.nan
+    keep = np.delete(np.arange(len(session)), 5)
+    for share in (1.0, 0.5, 0.0):
+        out = live_links.scaled_rests(session, true, emulated, share)
+        expected = (share * (shared + noise.mean(axis=0)) + (noise[0] - noise[1]) / np.sqrt(2))
+        np.testing.assert_allclose(out.sphere, true[keep] + expected[keep], rtol=0, atol=1e-15)
+        np.testing.assert_array_equal(out.Theta, session.Theta[keep])
