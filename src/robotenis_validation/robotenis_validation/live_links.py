@@ -305,7 +305,8 @@ def scaled_rests(session, true, emulated, share):
     rest reads true + share (e1 + e2) / 2 + (e1 - e2) / sqrt(2): the detector's error at rest
     pose by pose scaled by ``share`` (their mean, which keeps half an emulation's noise), and one
     emulation's noise (their difference). What a calibration would give with a detector whose
-    error at rest that depends on the pose were ``share`` of this one's. Rests an emulation
+    error at rest that depends on the pose were ``share`` of this one's. The rests keep the
+    session's covariances (the calibration learns the floor beyond them); rests an emulation
     refused (NaN) are dropped.
     """
     e1, e2 = emulated[:2]
