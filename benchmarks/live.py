@@ -115,7 +115,7 @@ def live_bag(bag, robot, seed):
     d_out, meas_out = pipeline.calibrate_session(unbiased, pipeline.Settings(seed=seed))
     out = scored(f'live bag, detector at rest out ({len(unbiased)})', d_out, meas_out, unbiased,
                  robot, true_sides.at(unbiased.stamps))[0]
-    true = live_links.true_sphere(robot, session.Theta, sides)
+    true = robot.camera_reading(C)
     shares = []
     for share in live_links.POSE_SHARES:
         made = live_links.scaled_rests(session, true, emulated, share)

@@ -355,8 +355,8 @@ def main(argv=None):
           f'pose by pose {np.round(pose * 1e3, 3)} mm')
     for share in POSE_SHARES:
         print(calibration_line(f"emulated rests, the detector's error at rest x{share:g} (its "
-                               'noise kept)', scaled_rests(session, true_sphere(
-                                   truth, session.Theta, sides), emulated, share),
+                               'noise kept)', scaled_rests(session, truth.camera_reading(C),
+                                                           emulated, share),
                                truth, true_sides))
     replay = replayed(rec, truth, session)
     ok = np.all(np.isfinite(replay), axis=(0, 2))
