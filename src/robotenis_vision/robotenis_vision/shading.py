@@ -1,0 +1,186 @@
+"""
+The ball's limb shading known from the light measured on its disc: a model fit without free limb.
+
+The model fit (``model_fit``) takes the shading near the limb as a0 + a1 (sin(i) - 1) +
+beta(phi) cos(i), beta three free coefficients around the outline. Collinear with the edge's
+position, they double the depth noise of a fit and turn a small misfit of the edge into a large
+depth error (docs/investigations.md, "What the 3x target asks of the detector"). A Lambertian
+ball under one distant light shades as
+
+    y = ambient + max(0, n . L)                                   (L: diffuse times the light)
+
+at its surface normal n. ``measure_light`` fits ambient and L on the disc's deep pixels (a
+specular lobe measured by ``highlight`` taken out first, Tukey's weights for what is left);
+``KnownLimb`` renders that diffuse term near the outline, less its value at the limb (so it is
+continuous across the edge: the step stays the fit's own), over subsampled pixels and blurred as
+the edge is, and the fit takes it out of the annulus's pixels as it takes out a lobe, its limb
+term off (``fit``). Where one light does not explain the disc (an environment, an area light, a
+texture on the ball) ``measure_light`` returns None and the free limb is kept.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+from robotenis_vision import highlight, model_fit
+from robotenis_vision.model_fit import camera_key, ideal_maps, SCALE_FLOOR
+from scipy.ndimage import binary_dilation, gaussian_filter
+
+SUBSAMPLES = 8                 # rays per pixel side near the outline: the limb's square root
+DEEP_SUBSAMPLES = 3            # ... and deeper, where the shading is smooth
+BAND_PX = 2.0                  # how near the outline a pixel takes SUBSAMPLES
+TUKEY = 4.685                  # biweight constant, in robust sigmas
+ITERATIONS = 25
+MIN_PIXELS = 200               # disc pixels the light needs
+MAX_MISFIT = 1.5               # the disc's residual RMS over its noise: one light fails beyond
+PASSES = 2                     # the known limb follows the sphere: refitted from where it ended,
+REFIT_PX = 0.1                 # if its outline moved this much
+
+
+@dataclass(frozen=True)
+class KnownLimb:
+    """The ball's diffuse shading near its outline from a measured light, and a specular lobe."""
+
+    ambient: float
+    L: np.ndarray              # (3,) optical frame: the diffuse level times the light's direction
+    lobe: object = None        # highlight.Highlight or None
+
+    def values(self, camera, pixels, c, R, s):
+        """
+        Return the shading less its limb value at image pixels (u, v), blurred as the edge (s px).
+
+        Each pixel is the mean over its area of rays that meet the ball (the others see none):
+        SUBSAMPLES x SUBSAMPLES of them within BAND_PX of the outline, where the shading rises as
+        a square root, DEEP_SUBSAMPLES x DEEP_SUBSAMPLES elsewhere; then blurred by the rest of
+        the edge's spread, sqrt(s^2 - 1/12) px. The lobe's values (``highlight.Highlight.values``)
+        are added.
+        """
+        margin = int(np.ceil(3 * s)) + 1
+        lo = np.maximum(pixels.min(axis=0) - margin, 0)
+        hi = np.minimum(pixels.max(axis=0) + margin + 1, [camera.width, camera.height])
+        ring = np.zeros((hi[1] - lo[1], hi[0] - lo[0]), dtype=bool)
+        ring[pixels[:, 1] - lo[1], pixels[:, 0] - lo[0]] = True
+        ring = binary_dilation(ring, iterations=margin)
+        vv, uu = np.nonzero(ring)
+        ideal_map, stretch_map = ideal_maps(camera_key(camera))
+        centre = ideal_map[vv + lo[1], uu + lo[0]]
+        rays = np.column_stack([centre, np.ones(len(centre))]) @ np.linalg.inv(camera.K).T
+        rays /= np.linalg.norm(rays, axis=1)[:, None]
+        # the limb's value along each pixel's plane through the centre (it varies slowly)
+        limb = np.maximum(limb_normals(rays, c, R) @ self.L, 0.0)
+        # how far from the outline, px: the angle to the centre's ray less the outline's
+        angle = np.arccos(np.clip(rays @ (c / np.linalg.norm(c)), -1.0, 1.0))
+        near = np.abs(angle - np.arcsin(R / np.linalg.norm(c))) * camera.fx < BAND_PX
+        image = np.zeros(ring.shape)
+        for k, where in ((SUBSAMPLES, near), (DEEP_SUBSAMPLES, ~near)):
+            offsets = np.stack(np.meshgrid((np.arange(k) + 0.5) / k - 0.5,
+                                           (np.arange(k) + 0.5) / k - 0.5), -1).reshape(-1, 2)
+            ideal = centre[where][:, None, :] + (
+                offsets if stretch_map is None
+                else np.einsum('nij,kj->nki', stretch_map[vv[where] + lo[1], uu[where] + lo[0]],
+                               offsets))
+            n, _, cos_i = highlight._normals(camera, ideal.reshape(-1, 2), c, R)
+            g = np.where(cos_i > 0, np.maximum(n @ self.L, 0.0)
+                         - np.repeat(limb[where], k * k), 0.0)
+            image[vv[where], uu[where]] = g.reshape(-1, k * k).mean(axis=1)
+        image = gaussian_filter(image, np.sqrt(max(s * s - 1 / 12, 0.0)), mode='nearest')
+        out = image[pixels[:, 1] - lo[1], pixels[:, 0] - lo[0]]
+        if self.lobe is not None:
+            out = out + self.lobe.values(camera, pixels, c, R, s)
+        return out
+
+
+def limb_normals(rays, c, R):
+    """
+    Return the normals (n, 3) where each unit ray's plane through centre c touches the outline.
+
+    The outline's ray at angle b0 from the centre's (sin b0 = R / |c|) touches the sphere where
+    its normal is cos(b0) e - sin(b0) c / |c|, e the unit direction from the centre's ray toward
+    the ray within their plane.
+    """
+    ch = np.asarray(c, dtype=float) / np.linalg.norm(c)
+    e = rays - (rays @ ch)[:, None] * ch
+    e /= np.maximum(np.linalg.norm(e, axis=1), 1e-12)[:, None]
+    b0 = np.arcsin(R / np.linalg.norm(c))
+    return np.cos(b0) * e - np.sin(b0) * ch
+
+
+def disc(img, camera, c, R, blur, gamma):
+    """
+    Return the disc's deep pixels: unit normals, linear values, image pixels (u, v) and noise.
+
+    As ``highlight.disc_pixels`` chooses them (deeper than 3 blurs and a pixel, not saturated);
+    the noise from second differences along rows (blind to the shading's gradient).
+    """
+    r_px = camera.apparent_radius(c, R)
+    centre = camera.project(c)
+    lo = np.maximum(np.floor(centre - 1.2 * r_px).astype(int), 0)
+    hi = np.minimum(np.ceil(centre + 1.2 * r_px).astype(int) + 1, [camera.width, camera.height])
+    ideal = ideal_maps(camera_key(camera))[0][lo[1]:hi[1], lo[0]:hi[0]]
+    values = np.asarray(img, dtype=float)[lo[1]:hi[1], lo[0]:hi[0]]
+    n, _, cos_i = highlight._normals(camera, ideal.reshape(-1, 2), c, R)
+    keep = ((cos_i.reshape(values.shape) > np.cos(highlight._rim_angle(camera, c, R, blur)))
+            & (values > model_fit.SATURATED[0]) & (values < model_fit.SATURATED[1]))
+    y, w = model_fit.linearise(values.ravel(), gamma)
+    triple = keep[:, 2:] & keep[:, 1:-1] & keep[:, :-2]
+    weighted = (y * np.sqrt(w)).reshape(values.shape)
+    noise = (1.4826 * np.median(np.abs(np.diff(weighted, 2, axis=1)[triple])) / np.sqrt(6)
+             if triple.any() else np.inf)
+    index = np.flatnonzero(keep)
+    vv, uu = np.divmod(index, values.shape[1])
+    return n[index], y[index], np.column_stack([uu + lo[0], vv + lo[1]]), float(noise)
+
+
+def measure_light(img, camera, c, R, blur, gamma=1.0, lobe=None):
+    """
+    Fit ambient + max(0, n . L) on the disc of sphere c; a KnownLimb, or None if one light fails.
+
+    Started from the unclamped fit (ambient + n . L, linear) with the ambient at the disc's
+    darkest values, then Gauss-Newton on the clamped model with Tukey's weights from the fourth
+    iteration. None with fewer than MIN_PIXELS disc pixels or a residual RMS (over the weights'
+    kept pixels) above MAX_MISFIT times the disc's noise (floored at SCALE_FLOOR).
+    """
+    n, y, pixels, noise = disc(img, camera, c, R, blur, gamma)
+    if len(y) < MIN_PIXELS:
+        return None
+    if lobe is not None:
+        y = y - lobe.values(camera, pixels, c, R, blur)
+    p = np.linalg.lstsq(np.column_stack([np.ones(len(y)), n]), y, rcond=None)[0]
+    p[0] = np.percentile(y, 2)
+    w = np.ones(len(y))
+    for it in range(ITERATIONS):
+        s = n @ p[1:]
+        lit = s > 0
+        r = y - (p[0] + np.where(lit, s, 0.0))
+        if it >= 3:
+            scale = max(1.4826 * np.median(np.abs(r)), SCALE_FLOOR)
+            u = r / (TUKEY * scale)
+            w = np.where(np.abs(u) < 1, (1 - u * u) ** 2, 0.0)
+        J = np.column_stack([np.ones(len(y)), n * lit[:, None]])
+        p = p + np.linalg.solve(J.T @ (J * w[:, None]) + 1e-9 * np.eye(4), J.T @ (w * r))
+    kept = w > 0
+    misfit = np.sqrt(np.mean(r[kept] ** 2)) if kept.any() else np.inf
+    if not misfit <= MAX_MISFIT * max(noise, SCALE_FLOOR):
+        return None
+    return KnownLimb(float(p[0]), p[1:].copy(), lobe)
+
+
+def fit(img, camera, R, c0, blur, gamma=1.0, noise_levels=None, lobe=None, background=None):
+    """
+    Return the model fit of sphere c0's ball with its limb known (model_fit.ModelFit), or None.
+
+    The light is measured on the disc where the sphere lies (``measure_light``), its limb shading
+    taken out of the annulus's pixels, and the model fitted without its limb term; again from
+    where it ended if its outline moved REFIT_PX or more (the known shading was drawn from c0).
+    None when one light does not explain the disc.
+    """
+    c = np.asarray(c0, dtype=float)
+    for _ in range(PASSES):
+        known = measure_light(img, camera, c, R, blur, gamma, lobe)
+        if known is None:
+            return None
+        result = model_fit.fit(img, camera, R, c, blur, gamma, limb=False,
+                               noise_levels=noise_levels, highlight=known,
+                               background=background)
+        if max(model_fit.outline_offset(camera, R, c, result.c)) < REFIT_PX:
+            break
+        c, blur = result.c, result.blur
+    return result
