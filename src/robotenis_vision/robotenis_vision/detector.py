@@ -661,8 +661,9 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
     pixels the fit uses; LOOK looks for one.
     A previous frame's ball is where it was: its fit is not made again (a wrong prior must fail,
     not wander to what lies beside it); its limb's shading is the light's measured on its disc
-    where one light explains the disc (``shading.fit``: the model's free limb term doubles the
-    depth noise at rest), the free limb's otherwise. From a previous frame's model fit, its
+    where one light explains the disc and the fit agrees with the free limb's (``shading.fit``,
+    ``shading.agrees``: the model's free limb term doubles the depth noise at rest), the free
+    limb's otherwise. From a previous frame's model fit, its
     ``noise_levels`` settle the robust weights at once (model_fit.fit); its ``edge_fraction``
     (extra 'edge_fraction' of an outline method's) sets what ``outline`` needs. ``background``:
     a plate of what lies behind the ball (model_fit.fit), for the model fit from a previous
@@ -678,13 +679,14 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
         else:
             if lobe is LOOK:                # at rest: c0 and its blur from the frame before
                 lobe = highlight.fit(img, camera, c0, radius, blur, gamma)
-            # the limb's shading from the light on the disc where one light explains it
-            fit = shading.fit(img, camera, radius, c0, blur, gamma, noise_levels, lobe,
-                              background)
-            if fit is None:
-                fit = model_fit.fit(img, camera, radius, c0, blur, gamma,
-                                    noise_levels=noise_levels, highlight=lobe,
-                                    background=background)
+            fit = model_fit.fit(img, camera, radius, c0, blur, gamma,
+                                noise_levels=noise_levels, highlight=lobe,
+                                background=background)
+            # the limb's shading from the light on the disc where it explains the limb too
+            known = shading.fit(img, camera, radius, c0, blur, gamma, noise_levels, lobe,
+                                background)
+            if known is not None and shading.agrees(known, fit):
+                fit = known
         if lobe is LOOK:                    # from a search: where the fit ended, and again
             lobe = highlight.fit(img, camera, fit.c, radius, fit.blur, gamma)
             if lobe is not None:

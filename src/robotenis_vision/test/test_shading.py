@@ -94,14 +94,38 @@ def test_the_known_limb_fit_is_tighter_than_the_free_one():
     On repeated noisy renders of one ball (the free limb's beta, collinear with the edge, doubles
     the spread): an F test at 1 %.
     """
-    from scipy.stats import f as f_dist
+    from scipy.stats import binom, f as f_dist
     cam = camera.default()
     C = np.array(CENTRES[0])
     rng = np.random.default_rng(5)
-    known, free = [], []
+    known, free, refused = [], [], 0
     for _ in range(40):
         image = cm.render(cam, C, R, rng, lighting=NO_HIGHLIGHT, background=PLAIN)
-        known.append(shading.fit(image, cam, R, C, 0.85).c[2])
-        free.append(model_fit.fit(image, cam, R, C, 0.85).c[2])
+        fits = shading.fit(image, cam, R, C, 0.85), model_fit.fit(image, cam, R, C, 0.85)
+        known.append(fits[0].c[2])
+        free.append(fits[1].c[2])
+        refused += not shading.agrees(*fits)
     ratio = np.var(free, ddof=1) / np.var(known, ddof=1)
     assert ratio > f_dist.ppf(0.99, len(free) - 1, len(known) - 1)
+    # where the light explains the limb, agrees refuses one fit in a hundred
+    assert refused <= binom.ppf(0.999, len(free), 0.01)
+
+
+def test_a_limb_the_disc_light_does_not_explain_is_refused():
+    """
+    Mitsuba's scene 006 (committed set): a side point light 0.26 m from a matte ball.
+
+    One light explains the disc (measure_light accepts it), but the known limb's depth lies far
+    outside the free limb's interval there (1 mm apart at 0.44 m): agrees refuses it.
+    """
+    from test_mitsuba_set import index, load
+    from robotenis_vision import detector, highlight
+    truth, cam, frames = load(next(e for e in index() if e['id'] == '006'))
+    gamma = truth['scene']['exposure']['gamma']
+    cold = detector.detect(frames[0], cam, R, gamma=gamma)
+    blur = cold.extra['psf_sigma']
+    lobe = highlight.fit(frames[0], cam, cold.position, R, blur, gamma)
+    known = shading.fit(frames[0], cam, R, cold.position, blur, gamma, lobe=lobe)
+    free = model_fit.fit(frames[0], cam, R, cold.position, blur, gamma, highlight=lobe)
+    assert known is not None
+    assert not shading.agrees(known, free)
