@@ -40,7 +40,11 @@ minor semi-axis) measured in the same run:
 7. at rest, as the sphere_detector node measures (robotenis_vision.rest.RestCorrection: the conic
    on every frame, the model fit on mean images at 1, 8, 16, 32 frames) against the node before
    it (the model fit seeded on every frame at rest): the model fits' CPU per rest, and the error
-   of the mean of a rest's last frames, the part the calibration averages.
+   of the mean of a rest's last frames, the part the calibration averages;
+8. at rest on Mitsuba: the model fit on the mean of a scene's repeated renders (REST_REPEATS
+   more of every scene after the first REPEAT_SCENES, cached too), as the node fits a rest's
+   mean image, against the free limb's fit of the same image: the node's limb is known from the
+   light on the disc where that agrees with the free limb (robotenis_vision.shading).
 """
 import argparse
 import os
@@ -57,7 +61,7 @@ import cv2  # noqa: E402
 import mitsuba_scenes as ms  # noqa: E402
 import numpy as np  # noqa: E402
 from robotenis_sim import camera_model as cm  # noqa: E402
-from robotenis_vision import camera, detector  # noqa: E402
+from robotenis_vision import camera, detector, highlight, model_fit  # noqa: E402
 from robotenis_vision.rest import outline_px, RestCorrection  # noqa: E402
 from scipy.stats import chi2  # noqa: E402
 
@@ -72,6 +76,7 @@ PINHOLE = camera.Camera(ms.PROJECT_CAMERA.K, np.zeros(5), 640, 480, 'mitsuba')
 SCENES, SEED = 120, 13
 FRAMES = 6                      # project renderer: frames per scene
 REPEAT_SCENES, REPEATS = 10, 10  # Mitsuba: scenes rendered again, and how often
+REST_REPEATS = 7                # ... and the others, for their means at rest (section 8)
 METHODS = ('model', 'conic', 'baseline')
 TARGET_DEPTH_BIAS, TARGET_LATERAL_BIAS = 0.05, 0.01         # % of range
 TARGET_PRECISION, TARGET_RATIO, TARGET_FAILURES = 1.5, 10.0, 1.0
@@ -603,6 +608,78 @@ def rest_pair(c, kw, rng, frames, averaged):
             len(measured[0]) / still[0], len(measured[1]) / still[1])
 
 
+def mitsuba_at_rest(scenes):
+    """
+    Compare the node's model fit at rest with the free limb's on Mitsuba's mean images.
+
+    A scene's frames: its render and its repeats (REPEATS for the first REPEAT_SCENES,
+    REST_REPEATS for the others); their mean is what the node fits at rest, seeded by the conic's
+    ball in the first frame. The node's fit (detector.detect from that seed) takes the limb's
+    shading from the light on the disc where it agrees with the free limb; the free limb's
+    (model_fit.fit with the highlight's lobe, as the node fitted before) is the baseline.
+    """
+    print(f"8. at rest on Mitsuba: the mean of each scene's render and its {REPEATS} "
+          f'(first {REPEAT_SCENES} scenes) or {REST_REPEATS} repeats, the model fit seeded by the '
+          "conic's ball of the first; depth error, % of range")
+    t0, rendered, rows = time.time(), 0, []
+    for k, scene in enumerate(scenes):
+        image, truth, new = ms.cached(scene, CACHE)
+        rendered += new
+        frames = [image]
+        for j in range(REPEATS if k < REPEAT_SCENES else REST_REPEATS):
+            frame, new = ms.cached_repeat(scene, image, truth, j, CACHE)
+            rendered += new
+            frames.append(frame)
+        if new or (k + 1) % 40 == 0:
+            print(f"   ... scene {scene['id']} ({k + 1}/{len(scenes)}, {rendered} rendered, "
+                  f'{time.time() - t0:.0f} s)', flush=True)
+        row = rest_on_mean(frames, truth)
+        if row is not None:
+            rows.append((scene['id'],) + row)
+    if not rows:
+        print('   no scene measured at rest')
+        return
+    ids = [r[0] for r in rows]
+    a = np.array([r[1:] for r in rows])
+    known = a[:, 2] > 0
+    rms = np.sqrt(np.mean(a[:, :2] ** 2, axis=0))
+    print(f'   {len(a)} scenes (the others refused by the conic or a fit): depth error RMS '
+          f'{rms[0]:.3f} % free limb, {rms[1]:.3f} % as the node; the limb known on '
+          f'{known.sum()}: there {rms_pair(a[known])}')
+    for k in np.argsort(-np.abs(a[:, 1] - a[:, 0]))[:3]:
+        print(f'   scene {ids[k]}: free {a[k, 0]:+.3f} %, node {a[k, 1]:+.3f} % '
+              f"({'known' if a[k, 2] else 'free'} limb)")
+
+
+def rms_pair(a):
+    """Return 'RMS x % free, y % known' over rows (free, node, ...), or 'none'."""
+    if not len(a):
+        return 'none'
+    rms = np.sqrt(np.mean(a[:, :2] ** 2, axis=0))
+    return f'{rms[0]:.3f} % free, {rms[1]:.3f} % known'
+
+
+def rest_on_mean(frames, truth):
+    """
+    Return a mean image's depth error, % of range, free limb and node, and if its limb was known.
+
+    None where the conic refuses the first frame or either fit refuses the mean.
+    """
+    c = np.asarray(truth['ball']['center_m'])
+    gamma = truth['scene']['exposure']['gamma']
+    mean = np.mean([f.astype(float) for f in frames], axis=0)
+    try:
+        seed = detector.detect(frames[0], PINHOLE, R, gamma=gamma)
+        blur = seed.extra['psf_sigma']
+        lobe = highlight.fit(mean, PINHOLE, seed.position, R, blur, gamma)
+        free = model_fit.fit(mean, PINHOLE, R, seed.position, blur, gamma, highlight=lobe)
+        node = detector.detect(mean, PINHOLE, R, 'model', seed, gamma, search=False)
+    except detector.DetectionError:
+        return None
+    along = [100 * split(p - c, c)[0] / np.linalg.norm(c) for p in (free.c, node.position)]
+    return along[0], along[1], float(node.extra['limb'] == 'known')
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.strip().splitlines()[0])
     parser.add_argument('--seed', type=int, default=SEED,
@@ -634,6 +711,7 @@ def main(argv=None):
     speed_verdicts(rows)
     render_speed()
     at_rest(scenes)
+    mitsuba_at_rest(scenes)
     return 0
 
 

@@ -663,17 +663,18 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
     not wander to what lies beside it); its limb's shading is the light's measured on its disc
     where one light explains the disc and the fit agrees with the free limb's (``shading.fit``,
     ``shading.agrees``: the model's free limb term doubles the depth noise at rest), the free
-    limb's otherwise. From a previous frame's model fit, its
-    ``noise_levels`` settle the robust weights at once (model_fit.fit); its ``edge_fraction``
-    (extra 'edge_fraction' of an outline method's) sets what ``outline`` needs. ``background``:
-    a plate of what lies behind the ball (model_fit.fit), for the model fit from a previous
-    frame's.
+    limb's otherwise (the detection's extra 'limb': 'known' or 'free'). From a previous frame's
+    model fit, its ``noise_levels`` settle the robust weights at once (model_fit.fit); its
+    ``edge_fraction`` (extra 'edge_fraction' of an outline method's) sets what ``outline`` needs.
+    ``background``: a plate of what lies behind the ball (model_fit.fit), for the model fit from a
+    previous frame's.
     """
     if method == 'baseline':
         centre = camera.project(c0)
         r = camera.apparent_radius(c0, radius)
         return baseline.detect(img, camera, radius, centre, r)
     if method == 'model':
+        limb_shading = 'free'
         if blur is None:
             fit = _fit_from_search(img, camera, radius, c0, gamma)
         else:
@@ -686,7 +687,7 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
             known = shading.fit(img, camera, radius, c0, blur, gamma, noise_levels, lobe,
                                 background)
             if known is not None and shading.agrees(known, fit):
-                fit = known
+                fit, limb_shading = known, 'known'
         if lobe is LOOK:                    # from a search: where the fit ended, and again
             lobe = highlight.fit(img, camera, fit.c, radius, fit.blur, gamma)
             if lobe is not None:
@@ -713,7 +714,7 @@ def measure(img, camera, radius, method, c0, blur, gamma=1.0, noise_levels=None,
                          {'psf_sigma': fit.blur, 'noise': fit.noise, 'coverage': covered,
                           'rms': fit.rms, 'kept': fit.kept, 'iterations': fit.iterations,
                           'step': float(np.median(step)), 'noise_levels': fit.noise_levels,
-                          'highlight': lobe, 'limb_variation': limb,
+                          'highlight': lobe, 'limb_variation': limb, 'limb': limb_shading,
                           'plate_share': fit.plate_share})
     ideal, pf, sigma, c_out, fraction = outline(img, camera, radius, c0, blur, edge_fraction)
     xy = camera.to_normalized(ideal)

@@ -30,8 +30,9 @@ from robotenis_vision.model_fit import camera_key, ideal_maps, SCALE_FLOOR
 from scipy.ndimage import binary_dilation, gaussian_filter
 from scipy.special import chdtri
 
-SUBSAMPLES = 8                 # rays per pixel side near the outline: the limb's square root
-DEEP_SUBSAMPLES = 3            # ... and deeper, where the shading is smooth
+# rays per pixel side near the outline, where the limb's shading rises as a square root (8 moved
+# six noise-free balls' depth by 2 um at most, for twice the CPU), and deeper, where it is smooth
+SUBSAMPLES, DEEP_SUBSAMPLES = 4, 3
 BAND_PX = 2.0                  # how near the outline a pixel takes SUBSAMPLES
 TUKEY = 4.685                  # biweight constant, in robust sigmas
 ITERATIONS = 25

@@ -129,3 +129,18 @@ def test_a_limb_the_disc_light_does_not_explain_is_refused():
     free = model_fit.fit(frames[0], cam, R, cold.position, blur, gamma, highlight=lobe)
     assert known is not None
     assert not shading.agrees(known, free)
+    at_rest = detector.detect(frames[0], cam, R, 'model', cold, gamma, search=False)
+    assert at_rest.extra['limb'] == 'free'
+
+
+def test_the_detector_at_rest_knows_the_limb_the_light_explains():
+    """detector.detect from a previous frame's ball, on a mean image: the limb known."""
+    from robotenis_vision import detector
+    cam = camera.default()
+    C = np.array(CENTRES[1])
+    rng = np.random.default_rng(2)
+    frames = [cm.render(cam, C, R, rng, lighting=NO_HIGHLIGHT, background=PLAIN)
+              for _ in range(8)]
+    seed = detector.detect(frames[0], cam, R)
+    mean = np.mean([f.astype(float) for f in frames], axis=0)
+    assert detector.detect(mean, cam, R, 'model', seed, search=False).extra['limb'] == 'known'
