@@ -54,6 +54,7 @@ os.environ.setdefault('OMP_NUM_THREADS', '1')
 
 import sys  # noqa: E402
 import time  # noqa: E402
+from unittest import mock  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
@@ -61,7 +62,7 @@ import cv2  # noqa: E402
 import mitsuba_scenes as ms  # noqa: E402
 import numpy as np  # noqa: E402
 from robotenis_sim import camera_model as cm  # noqa: E402
-from robotenis_vision import camera, detector, highlight, model_fit  # noqa: E402
+from robotenis_vision import camera, detector, shading  # noqa: E402
 from robotenis_vision.rest import outline_px, RestCorrection  # noqa: E402
 from scipy.stats import chi2  # noqa: E402
 
@@ -615,8 +616,8 @@ def mitsuba_at_rest(scenes):
     A scene's frames: its render and its repeats (REPEATS for the first REPEAT_SCENES,
     REST_REPEATS for the others); their mean is what the node fits at rest, seeded by the conic's
     ball in the first frame. The node's fit (detector.detect from that seed) takes the limb's
-    shading from the light on the disc where it agrees with the free limb; the free limb's
-    (model_fit.fit with the highlight's lobe, as the node fitted before) is the baseline.
+    shading from the light on the disc where it agrees with the free limb; the same fit with the
+    limb left free (shading.fit refusing every disc: the node before) is the baseline.
     """
     print(f"8. at rest on Mitsuba: the mean of each scene's render and its {REPEATS} "
           f'(first {REPEAT_SCENES} scenes) or {REST_REPEATS} repeats, the model fit seeded by the '
@@ -670,13 +671,12 @@ def rest_on_mean(frames, truth):
     mean = np.mean([f.astype(float) for f in frames], axis=0)
     try:
         seed = detector.detect(frames[0], PINHOLE, R, gamma=gamma)
-        blur = seed.extra['psf_sigma']
-        lobe = highlight.fit(mean, PINHOLE, seed.position, R, blur, gamma)
-        free = model_fit.fit(mean, PINHOLE, R, seed.position, blur, gamma, highlight=lobe)
+        with mock.patch.object(shading, 'fit', return_value=None):
+            free = detector.detect(mean, PINHOLE, R, 'model', seed, gamma, search=False)
         node = detector.detect(mean, PINHOLE, R, 'model', seed, gamma, search=False)
     except detector.DetectionError:
         return None
-    along = [100 * split(p - c, c)[0] / np.linalg.norm(c) for p in (free.c, node.position)]
+    along = [100 * split(p - c, c)[0] / np.linalg.norm(c) for p in (free.position, node.position)]
     return along[0], along[1], float(node.extra['limb'] == 'known')
 
 

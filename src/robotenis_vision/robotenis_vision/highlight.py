@@ -70,26 +70,46 @@ class Highlight:
         a side-lit ball's lobe was predicted 0.2-0.5 grey levels low within 2 px of the outline,
         and that moved its fit 0.15 mm).
         """
-        margin = int(np.ceil(3 * s)) + 1
-        lo = np.maximum(pixels.min(axis=0) - margin, 0)
-        hi = np.minimum(pixels.max(axis=0) + margin + 1, [camera.width, camera.height])
-        ring = np.zeros((hi[1] - lo[1], hi[0] - lo[0]), dtype=bool)
-        ring[pixels[:, 1] - lo[1], pixels[:, 0] - lo[0]] = True
-        ring = binary_dilation(ring, iterations=margin)
-        vv, uu = np.nonzero(ring)
-        ideal_map, stretch_map = ideal_maps(camera_key(camera))
+        lo, shape, vv, uu = ring(camera, pixels, s)
         k = SUBSAMPLES
-        offsets = np.stack(np.meshgrid((np.arange(k) + 0.5) / k - 0.5,
-                                       (np.arange(k) + 0.5) / k - 0.5), -1).reshape(-1, 2)
-        ideal = ideal_map[vv + lo[1], uu + lo[0]][:, None, :] + (
-            offsets if stretch_map is None
-            else np.einsum('nij,kj->nki', stretch_map[vv + lo[1], uu + lo[0]], offsets))
-        n, view, cos_i = _normals(camera, ideal.reshape(-1, 2), c, R)
+        n, view, cos_i = _normals(camera, subpixels(camera, lo, vv, uu, k).reshape(-1, 2), c, R)
         g = np.where(cos_i > 0, lobes(n, view, self.light, self.width) @ self.amplitude, 0.0)
-        image = np.zeros(ring.shape)
+        image = np.zeros(shape)
         image[vv, uu] = g.reshape(-1, k * k).mean(axis=1)
-        image = gaussian_filter(image, np.sqrt(max(s * s - 1 / 12, 0.0)), mode='nearest')
-        return image[pixels[:, 1] - lo[1], pixels[:, 0] - lo[0]]
+        return blurred_at(image, s, pixels, lo)
+
+
+def ring(camera, pixels, s):
+    """
+    Return the pixels within 3 blurs (s px) and one pixel of image pixels (u, v), in their box.
+
+    Returns the box's corner lo (u, v), its shape (rows, columns) and the ring's rows vv and
+    columns uu within it.
+    """
+    margin = int(np.ceil(3 * s)) + 1
+    lo = np.maximum(pixels.min(axis=0) - margin, 0)
+    hi = np.minimum(pixels.max(axis=0) + margin + 1, [camera.width, camera.height])
+    inside = np.zeros((hi[1] - lo[1], hi[0] - lo[0]), dtype=bool)
+    inside[pixels[:, 1] - lo[1], pixels[:, 0] - lo[0]] = True
+    inside = binary_dilation(inside, iterations=margin)
+    vv, uu = np.nonzero(inside)
+    return lo, inside.shape, vv, uu
+
+
+def subpixels(camera, lo, vv, uu, k):
+    """Return the ideal positions (n, k^2, 2) of k x k rays over each pixel (lo + (uu, vv))."""
+    ideal_map, stretch_map = ideal_maps(camera_key(camera))
+    offsets = np.stack(np.meshgrid((np.arange(k) + 0.5) / k - 0.5,
+                                   (np.arange(k) + 0.5) / k - 0.5), -1).reshape(-1, 2)
+    return ideal_map[vv + lo[1], uu + lo[0]][:, None, :] + (
+        offsets if stretch_map is None
+        else np.einsum('nij,kj->nki', stretch_map[vv + lo[1], uu + lo[0]], offsets))
+
+
+def blurred_at(image, s, pixels, lo):
+    """Return ``image`` (its corner at lo) blurred by sqrt(s^2 - 1/12) px, at image pixels."""
+    image = gaussian_filter(image, np.sqrt(max(s * s - 1 / 12, 0.0)), mode='nearest')
+    return image[pixels[:, 1] - lo[1], pixels[:, 0] - lo[0]]
 
 
 def harmonics(n):
@@ -134,13 +154,13 @@ def _normals(camera, ideal, c, R):
     return n, -rays, np.sqrt(np.maximum(disc, 0.0)) / R
 
 
-def disc_pixels(img, camera, c, R, blur, gamma=1.0):
+def disc_pixels(img, camera, c, R, blur, gamma=1.0, most=MAX_PIXELS):
     """
     Return the normals, view directions, linear values and weights of the ball's disc pixels.
 
     Pixels deeper than 3 blurs and a pixel inside the outline (near the limb cos^2(i) = 2 t / r
-    at a depth of t px on a ball of r px), not saturated, subsampled to at most MAX_PIXELS; and
-    the pixels' noise (the image's grey levels).
+    at a depth of t px on a ball of r px), not saturated, subsampled to at most ``most`` (None:
+    all); then their image pixels (u, v) and the pixels' noise (the image's grey levels).
     """
     r_px = camera.apparent_radius(c, R)
     centre = camera.project(c)
@@ -158,8 +178,11 @@ def disc_pixels(img, camera, c, R, blur, gamma=1.0):
     noise = (1.4826 * np.median(np.abs(np.diff(weighted, 2, axis=1)[triple])) / np.sqrt(6)
              if triple.any() else np.inf)
     index = np.flatnonzero(keep)
-    index = index[::max(1, int(np.ceil(len(index) / MAX_PIXELS)))]
-    return n[index], v[index], y[index], w[index], float(noise)
+    if most is not None:
+        index = index[::max(1, int(np.ceil(len(index) / most)))]
+    vv, uu = np.divmod(index, values.shape[1])
+    return (n[index], v[index], y[index], w[index], np.column_stack([uu + lo[0], vv + lo[1]]),
+            float(noise))
 
 
 def fit(img, camera, c, R, blur, gamma=1.0):
@@ -169,7 +192,7 @@ def fit(img, camera, c, R, blur, gamma=1.0):
     ``blur``: the edge's spread (px), from a fit of the same sphere or a previous frame's;
     ``gamma``: the camera's response (model_fit.linearise).
     """
-    n, v, y, weight, noise = disc_pixels(img, camera, c, R, blur, gamma)
+    n, v, y, weight, _, noise = disc_pixels(img, camera, c, R, blur, gamma)
     B = harmonics(n)
     if len(y) < 4 * B.shape[1]:
         return None

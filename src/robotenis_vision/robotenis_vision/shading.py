@@ -27,7 +27,6 @@ from dataclasses import dataclass
 import numpy as np
 from robotenis_vision import highlight, model_fit
 from robotenis_vision.model_fit import camera_key, ideal_maps, SCALE_FLOOR
-from scipy.ndimage import binary_dilation, gaussian_filter
 from scipy.special import chdtri
 
 # rays per pixel side near the outline, where the limb's shading rises as a square root (8 moved
@@ -61,15 +60,8 @@ class KnownLimb:
         the edge's spread, sqrt(s^2 - 1/12) px. The lobe's values (``highlight.Highlight.values``)
         are added.
         """
-        margin = int(np.ceil(3 * s)) + 1
-        lo = np.maximum(pixels.min(axis=0) - margin, 0)
-        hi = np.minimum(pixels.max(axis=0) + margin + 1, [camera.width, camera.height])
-        ring = np.zeros((hi[1] - lo[1], hi[0] - lo[0]), dtype=bool)
-        ring[pixels[:, 1] - lo[1], pixels[:, 0] - lo[0]] = True
-        ring = binary_dilation(ring, iterations=margin)
-        vv, uu = np.nonzero(ring)
-        ideal_map, stretch_map = ideal_maps(camera_key(camera))
-        centre = ideal_map[vv + lo[1], uu + lo[0]]
+        lo, shape, vv, uu = highlight.ring(camera, pixels, s)
+        centre = ideal_maps(camera_key(camera))[0][vv + lo[1], uu + lo[0]]
         rays = np.column_stack([centre, np.ones(len(centre))]) @ np.linalg.inv(camera.K).T
         rays /= np.linalg.norm(rays, axis=1)[:, None]
         # the limb's value along each pixel's plane through the centre (it varies slowly)
@@ -77,20 +69,14 @@ class KnownLimb:
         # how far from the outline, px: the angle to the centre's ray less the outline's
         angle = np.arccos(np.clip(rays @ (c / np.linalg.norm(c)), -1.0, 1.0))
         near = np.abs(angle - np.arcsin(R / np.linalg.norm(c))) * camera.fx < BAND_PX
-        image = np.zeros(ring.shape)
+        image = np.zeros(shape)
         for k, where in ((SUBSAMPLES, near), (DEEP_SUBSAMPLES, ~near)):
-            offsets = np.stack(np.meshgrid((np.arange(k) + 0.5) / k - 0.5,
-                                           (np.arange(k) + 0.5) / k - 0.5), -1).reshape(-1, 2)
-            ideal = centre[where][:, None, :] + (
-                offsets if stretch_map is None
-                else np.einsum('nij,kj->nki', stretch_map[vv[where] + lo[1], uu[where] + lo[0]],
-                               offsets))
+            ideal = highlight.subpixels(camera, lo, vv[where], uu[where], k)
             n, _, cos_i = highlight._normals(camera, ideal.reshape(-1, 2), c, R)
             g = np.where(cos_i > 0, np.maximum(n @ self.L, 0.0)
                          - np.repeat(limb[where], k * k), 0.0)
             image[vv[where], uu[where]] = g.reshape(-1, k * k).mean(axis=1)
-        image = gaussian_filter(image, np.sqrt(max(s * s - 1 / 12, 0.0)), mode='nearest')
-        out = image[pixels[:, 1] - lo[1], pixels[:, 0] - lo[0]]
+        out = highlight.blurred_at(image, s, pixels, lo)
         if self.lobe is not None:
             out = out + self.lobe.values(camera, pixels, c, R, s)
         return out
@@ -111,32 +97,6 @@ def limb_normals(rays, c, R):
     return np.cos(b0) * e - np.sin(b0) * ch
 
 
-def disc(img, camera, c, R, blur, gamma):
-    """
-    Return the disc's deep pixels: unit normals, linear values, image pixels (u, v) and noise.
-
-    As ``highlight.disc_pixels`` chooses them (deeper than 3 blurs and a pixel, not saturated);
-    the noise from second differences along rows (blind to the shading's gradient).
-    """
-    r_px = camera.apparent_radius(c, R)
-    centre = camera.project(c)
-    lo = np.maximum(np.floor(centre - 1.2 * r_px).astype(int), 0)
-    hi = np.minimum(np.ceil(centre + 1.2 * r_px).astype(int) + 1, [camera.width, camera.height])
-    ideal = ideal_maps(camera_key(camera))[0][lo[1]:hi[1], lo[0]:hi[0]]
-    values = np.asarray(img, dtype=float)[lo[1]:hi[1], lo[0]:hi[0]]
-    n, _, cos_i = highlight._normals(camera, ideal.reshape(-1, 2), c, R)
-    keep = ((cos_i.reshape(values.shape) > np.cos(highlight._rim_angle(camera, c, R, blur)))
-            & (values > model_fit.SATURATED[0]) & (values < model_fit.SATURATED[1]))
-    y, w = model_fit.linearise(values.ravel(), gamma)
-    triple = keep[:, 2:] & keep[:, 1:-1] & keep[:, :-2]
-    weighted = (y * np.sqrt(w)).reshape(values.shape)
-    noise = (1.4826 * np.median(np.abs(np.diff(weighted, 2, axis=1)[triple])) / np.sqrt(6)
-             if triple.any() else np.inf)
-    index = np.flatnonzero(keep)
-    vv, uu = np.divmod(index, values.shape[1])
-    return n[index], y[index], np.column_stack([uu + lo[0], vv + lo[1]]), float(noise)
-
-
 def measure_light(img, camera, c, R, blur, gamma=1.0, lobe=None):
     """
     Fit ambient + max(0, n . L) on the disc of sphere c; a KnownLimb, or None if one light fails.
@@ -146,7 +106,7 @@ def measure_light(img, camera, c, R, blur, gamma=1.0, lobe=None):
     iteration. None with fewer than MIN_PIXELS disc pixels or a residual RMS (over the weights'
     kept pixels) above MAX_MISFIT times the disc's noise (floored at SCALE_FLOOR).
     """
-    n, y, pixels, noise = disc(img, camera, c, R, blur, gamma)
+    n, _, y, _, pixels, noise = highlight.disc_pixels(img, camera, c, R, blur, gamma, None)
     if len(y) < MIN_PIXELS:
         return None
     if lobe is not None:
