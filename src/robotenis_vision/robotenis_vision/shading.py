@@ -18,14 +18,15 @@ term off (``fit``). Where one light does not explain the disc (an environment, a
 texture on the ball) ``measure_light`` returns None and the free limb is kept. One light may
 explain the disc and not the limb (a glossy ball's Fresnel rim, a near or broad light): the known
 limb is used only where its depth lies within the free limb's 99 % interval (``agrees``). On the
-benchmark's Mitsuba scenes at rest that gate keeps it on about a fifth of them, where it is no
-worse than the free limb; without it, it was worse on most (docs/investigations.md, "The known
+benchmark's Mitsuba scenes at rest that gate keeps it on one in six, where it is no worse than
+the free limb; without it, it was worse on most (docs/investigations.md, "The known
 limb on a renderer this project did not write").
 """
 from dataclasses import dataclass
 
 import numpy as np
 from robotenis_vision import highlight, model_fit
+from robotenis_vision.detection import DetectionError
 from robotenis_vision.model_fit import camera_key, ideal_maps, SCALE_FLOOR
 from scipy.special import chdtri
 
@@ -138,16 +139,19 @@ def fit(img, camera, R, c0, blur, gamma=1.0, noise_levels=None, lobe=None, backg
     The light is measured on the disc where the sphere lies (``measure_light``), its limb shading
     taken out of the annulus's pixels, and the model fitted without its limb term; again from
     where it ended if its outline moved REFIT_PX or more (the known shading was drawn from c0).
-    None when one light does not explain the disc.
+    None when one light does not explain the disc or the fit without a free limb fails.
     """
     c = np.asarray(c0, dtype=float)
     for _ in range(PASSES):
         known = measure_light(img, camera, c, R, blur, gamma, lobe)
         if known is None:
             return None
-        result = model_fit.fit(img, camera, R, c, blur, gamma, limb=False,
-                               noise_levels=noise_levels, highlight=known,
-                               background=background)
+        try:
+            result = model_fit.fit(img, camera, R, c, blur, gamma, limb=False,
+                                   noise_levels=noise_levels, highlight=known,
+                                   background=background)
+        except DetectionError:          # the free limb's fit stands
+            return None
         if max(model_fit.outline_offset(camera, R, c, result.c)) < REFIT_PX:
             break
         c, blur = result.c, result.blur

@@ -144,3 +144,24 @@ def test_the_detector_at_rest_knows_the_limb_the_light_explains():
     seed = detector.detect(frames[0], cam, R)
     mean = np.mean([f.astype(float) for f in frames], axis=0)
     assert detector.detect(mean, cam, R, 'model', seed, search=False).extra['limb'] == 'known'
+
+
+def test_a_failed_known_fit_keeps_the_free_limb(monkeypatch):
+    """Where the fit without a free limb fails, shading.fit gives None and detect the free fit."""
+    from robotenis_vision import detector
+    from robotenis_vision.detection import DetectionError
+    cam = camera.default()
+    C = np.array(CENTRES[1])
+    image = cm.render(cam, C, R, np.random.default_rng(4), lighting=NO_HIGHLIGHT,
+                      background=PLAIN)
+    seed = detector.detect(image, cam, R)
+    free_fit = model_fit.fit
+
+    def fit(*args, limb=True, **kwargs):
+        if not limb:
+            raise DetectionError('the fit without a free limb failed')
+        return free_fit(*args, **kwargs)
+
+    monkeypatch.setattr(model_fit, 'fit', fit)
+    assert shading.fit(image, cam, R, C, 0.85) is None
+    assert detector.detect(image, cam, R, 'model', seed, search=False).extra['limb'] == 'free'
