@@ -21,10 +21,11 @@ def detector_bias(C, radius, method='model', camera=None, plate=True, **render_o
     Each ball is rendered by the hand camera's renderer without sensor noise (its defaults
     otherwise, or ``render_options`` of camera_model.render: a lighting, a blur) and measured: the
     error left is the detector's bias at that pose, the part that averaging frames at a rest does
-    not remove. A refused image gives a row of NaN. ``plate``: as the sphere_detector node
-    measures a session's rests (its ``background_plate``): the model method's ball is fitted
-    again from its detection with a background plate of the balls before it in C
-    (robotenis_vision.plate), each added once measured.
+    not remove. A refused image gives a row of NaN. The model method's ball is fitted again from
+    its detection, as the sphere_detector node fits a rest (the limb known where the light
+    explains it, robotenis_vision.shading); ``plate``: with a background plate of the balls
+    before it in C (robotenis_vision.plate, the node's ``background_plate``), each added once
+    measured.
     """
     camera = camera or vision_camera.default()
     rng = np.random.default_rng(0)
@@ -35,7 +36,7 @@ def detector_bias(C, radius, method='model', camera=None, plate=True, **render_o
         image = camera_model.render(camera, c, radius, rng, noise_sigma=0.0, **render_options)
         try:
             det = detector.detect(image, camera, radius, method)
-            if behind is not None:
+            if method == 'model':
                 det = detector.detect(image, camera, radius, method, det, search=False,
                                       background=behind)
         except detector.DetectionError:
