@@ -614,14 +614,15 @@ def mitsuba_at_rest(scenes):
     Compare the node's model fit at rest with the free limb's on Mitsuba's mean images.
 
     A scene's frames: its render and its repeats (REPEATS for the first REPEAT_SCENES,
-    REST_REPEATS for the others); their mean is what the node fits at rest, seeded by the conic's
-    ball in the first frame. The node's fit (detector.detect from that seed) takes the limb's
+    REST_REPEATS for the others); their mean is what the node fits at rest, seeded by the model
+    fit of the first frame (as the node seeds each fit of a rest after its first by the fit
+    before). The node's fit (detector.detect from that seed) takes the limb's
     shading from the light on the disc where it agrees with the free limb; the same fit with the
     limb left free (shading.fit refusing every disc: the node before) is the baseline.
     """
     print(f"8. at rest on Mitsuba: the mean of each scene's render and its {REPEATS} "
           f'(first {REPEAT_SCENES} scenes) or {REST_REPEATS} repeats, the model fit seeded by the '
-          "conic's ball of the first; depth error, % of range")
+          'model fit of the first; depth error, % of range')
     t0, rendered, rows = time.time(), 0, []
     for k, scene in enumerate(scenes):
         image, truth, new = ms.cached(scene, CACHE)
@@ -643,28 +644,27 @@ def mitsuba_at_rest(scenes):
     ids = [r[0] for r in rows]
     a = np.array([r[1:] for r in rows])
     known = a[:, 2] > 0
-    rms = np.sqrt(np.mean(a[:, :2] ** 2, axis=0))
-    print(f'   {len(a)} scenes (the others refused by the conic or a fit): depth error RMS '
-          f'{rms[0]:.3f} % free limb, {rms[1]:.3f} % as the node; the limb known on '
-          f'{known.sum()}: there {rms_pair(a[known])}')
+    print(f'   {len(a)} scenes (the others refused by a fit): depth error RMS '
+          f'{rms_pair(a, "free limb", "as the node")}; the limb known on {known.sum()}: there '
+          f'{rms_pair(a[known])}')
     for k in np.argsort(-np.abs(a[:, 1] - a[:, 0]))[:3]:
         print(f'   scene {ids[k]}: free {a[k, 0]:+.3f} %, node {a[k, 1]:+.3f} % '
               f"({'known' if a[k, 2] else 'free'} limb)")
 
 
-def rms_pair(a):
-    """Return 'RMS x % free, y % known' over rows (free, node, ...), or 'none'."""
+def rms_pair(a, free='free', node='known'):
+    """Return 'x % free, y % known': the RMS over rows (free, node, ...) of each; or 'none'."""
     if not len(a):
         return 'none'
     rms = np.sqrt(np.mean(a[:, :2] ** 2, axis=0))
-    return f'{rms[0]:.3f} % free, {rms[1]:.3f} % known'
+    return f'{rms[0]:.3f} % {free}, {rms[1]:.3f} % {node}'
 
 
 def rest_on_mean(frames, truth):
     """
     Return a mean image's depth error, % of range, free limb and node, and if its limb was known.
 
-    None where the conic refuses the first frame or either fit refuses the mean.
+    None where the model fit refuses the first frame or either fit refuses the mean.
     """
     c = np.asarray(truth['ball']['center_m'])
     gamma = truth['scene']['exposure']['gamma']
