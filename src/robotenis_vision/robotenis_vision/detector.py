@@ -226,28 +226,55 @@ def _seeded(img, camera, radius, method, prior, gamma, background):
     """
     Measure the ball where a previous frame's Detection ``prior`` has it (measure).
 
-    The model method from another method's prior (the conic's, as a rest's first fit starts)
-    fits from that ball as from a search, then from there as from a previous frame's model fit
-    (as study.detector_bias measures): the conic's outline can lie pixels inside the model's (on
-    a side-lit ball at 0.45 m behind 1.8 px of defocus it read 40 mm far), and a model fit
-    started there stayed in a minimum 17-33 mm far on half the frames, some within half a pixel
-    of the conic's outline; the fits of the rest after it, each seeded by the last, kept it.
-    Where the fit at rest refuses what the fit from a search passed (a ball on a texture can
-    keep too few of its pixels from one start and enough from the other), the latter stands.
+    The model method from another method's prior (the conic's, as a rest's first fit starts):
+    where its fit fails, or a fit from an outline LARGER_START_PX larger does not come back to
+    it (_comes_back), it fits from the prior's ball as from a search, then from there as from a
+    previous frame's model fit (as study.detector_bias measures). The conic's outline can lie
+    pixels inside the model's (on a side-lit ball at 0.45 m behind 1.8 px of defocus it read
+    40 mm far), and a model fit started there stayed 17-33 mm far on half the frames, some
+    within half a pixel of the conic's outline; the fits of the rest after it, each seeded by the
+    last, kept it. On 49 frames of benchmarks/vision.py's list within 0.6 m, 4 were fitted again
+    so (about 25 ms a first fit where none is). Where the fit at rest refuses what the fit from a
+    search passed (a ball on a texture can keep too few of its pixels from one start and enough
+    from the other), the latter stands.
     """
-    c0 = np.asarray(prior.position, dtype=float)
-    searched = None
-    if method == 'model' and prior.method != 'model':
-        prior = searched = measure(img, camera, radius, method, c0, None, gamma)
-        c0 = prior.position
+    def at_rest(start):
+        return measure(img, camera, radius, method, np.asarray(start.position, dtype=float),
+                       start.extra.get('psf_sigma'), gamma, start.extra.get('noise_levels'),
+                       start.extra.get('edge_fraction'), start.extra.get('highlight', LOOK),
+                       background)
+
+    if method != 'model' or prior.method == 'model':
+        return at_rest(prior)
     try:
-        return measure(img, camera, radius, method, c0, prior.extra.get('psf_sigma'), gamma,
-                       prior.extra.get('noise_levels'), prior.extra.get('edge_fraction'),
-                       prior.extra.get('highlight', LOOK), background)
+        det = at_rest(prior)
+        if _comes_back(img, camera, radius, det, gamma):
+            return det
     except DetectionError:
-        if searched is None:
-            raise
+        pass
+    searched = measure(img, camera, radius, method, prior.position, None, gamma)
+    try:
+        return at_rest(searched)
+    except DetectionError:
         return searched
+
+
+def _comes_back(img, camera, radius, det, gamma):
+    """
+    Return whether a model fit from an outline LARGER_START_PX larger ends within REFIT_PX of det.
+
+    Where the ball's outline lies beyond det's, or det's own fit held it where a plain fit would
+    not stay (a highlight's lobe taken from the conic's ball: scene 001 of benchmarks/vision.py
+    read 17 mm far so, a plain fit from there 2 mm near), the larger start ends apart.
+    """
+    c = det.position
+    r = camera.apparent_radius(c, radius)
+    try:
+        larger = model_fit.fit(img, camera, radius, c * (r / (r + LARGER_START_PX)),
+                               det.extra['psf_sigma'], gamma)
+    except DetectionError:
+        return True
+    return max(model_fit.outline_offset(camera, radius, c, larger.c)) < REFIT_PX
 
 
 def moved_prior(camera, track, t):
