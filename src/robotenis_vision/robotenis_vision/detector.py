@@ -234,9 +234,9 @@ def _seeded(img, camera, radius, method, prior, gamma, background):
     40 mm far), and a model fit started there stayed 17-33 mm far on half the frames, some
     within half a pixel of the conic's outline; the fits of the rest after it, each seeded by the
     last, kept it. On 49 frames of benchmarks/vision.py's list within 0.6 m, 4 were fitted again
-    so (about 25 ms a first fit where none is). Where the fit at rest refuses what the fit from a
-    search passed (a ball on a texture can keep too few of its pixels from one start and enough
-    from the other), the latter stands.
+    so; the probe costs about 25 ms a first fit where it comes back. Where the fit at rest refuses
+    what the fit from a search passed (a ball on a texture can keep too few of its pixels from
+    one start and enough from the other), the latter stands.
     """
     def at_rest(start):
         return measure(img, camera, radius, method, np.asarray(start.position, dtype=float),
@@ -264,8 +264,9 @@ def _comes_back(img, camera, radius, det, gamma):
     Return whether a model fit from an outline LARGER_START_PX larger ends within REFIT_PX of det.
 
     Where the ball's outline lies beyond det's, or det's own fit held it where a plain fit would
-    not stay (a highlight's lobe taken from the conic's ball: scene 001 of benchmarks/vision.py
-    read 17 mm far so, a plain fit from there 2 mm near), the larger start ends apart.
+    not stay (a highlight's lobe looked for around the conic's ball took a matte ball's own
+    shading, 79 grey levels: scene 001 of benchmarks/vision.py read 17 mm far so, a plain fit
+    from there 2 mm near), the larger start ends apart. True where that fit cannot be made.
     """
     c = det.position
     r = camera.apparent_radius(c, radius)
