@@ -268,14 +268,18 @@ def _comes_back(img, camera, radius, det, gamma):
     shading, 79 grey levels: scene 001 of benchmarks/vision.py read 17 mm far so, a plain fit
     from there 2 mm near), the larger start ends apart. True where that fit cannot be made.
     """
-    c = det.position
-    r = camera.apparent_radius(c, radius)
     try:
-        larger = model_fit.fit(img, camera, radius, c * (r / (r + LARGER_START_PX)),
+        larger = model_fit.fit(img, camera, radius, _larger(camera, radius, det.position),
                                det.extra['psf_sigma'], gamma)
     except DetectionError:
         return True
-    return max(model_fit.outline_offset(camera, radius, c, larger.c)) < REFIT_PX
+    return max(model_fit.outline_offset(camera, radius, det.position, larger.c)) < REFIT_PX
+
+
+def _larger(camera, radius, c):
+    """Return sphere c moved along its line of sight: its outline LARGER_START_PX larger."""
+    r = camera.apparent_radius(c, radius)
+    return np.asarray(c, dtype=float) * (r / (r + LARGER_START_PX))
 
 
 def moved_prior(camera, track, t):
@@ -798,10 +802,9 @@ def _fit_from_search(img, camera, radius, c0, gamma):
     """
     first = model_fit.fit(img, camera, radius, c0, 1.5, gamma, iterations=4, limb=False)
     fit = _refitted(img, camera, radius, first.c, first.blur, gamma)
-    r = camera.apparent_radius(first.c, radius)
     try:
-        larger = _refitted(img, camera, radius, first.c * (r / (r + LARGER_START_PX)),
-                           first.blur, gamma)
+        larger = _refitted(img, camera, radius, _larger(camera, radius, first.c), first.blur,
+                           gamma)
         if max(model_fit.outline_offset(camera, radius, fit.c, larger.c)) < REFIT_PX:
             return fit
         cost = model_fit.scores(img, camera, radius, [fit, larger], gamma)
