@@ -6,25 +6,27 @@ y down, z forward, m) as the camera (robotenis_vision.camera.Camera: K, plumb_bo
 
 * exact outline: a pixel ray d (undistorted through the camera's plumb_bob model) meets the sphere
   when the angle between d and C is below the half-angle beta of the tangent cone,
-  sin(beta) = R/|C|. The outline is that cone's section, a conic, bent by the distortion. Pixels
-  within a pixel of it are supersampled (8x8 rays, the undistortion linearised across the pixel)
-  for anti-aliasing;
+  sin(beta) = R/|C|. The outline is that cone's section, a conic, bent by the distortion;
+* a pixel integrates the lens's image over its area: near the outline the ball is drawn on 2 x 2
+  sub-pixels (those the outline crosses sampled by 8 x 8 rays each, the undistortion linearised
+  across the pixel), blurred on them and averaged;
 * shading at the surface point met by each ray: ambient + Lambertian diffuse for a light
   direction (frontal, side or behind the ball) + a Blinn-Phong specular highlight; values above
   255 saturate as on a real sensor;
 * a background (``Background.pattern``): a linear gradient plus a smooth random texture (flat when
   both are zero), a checkerboard, or a random texture, with a defocus of its own (it lies at
   another depth);
-* a Gaussian blur (lens and pixel) and a defocus (the uniform disc of a thin lens, ``defocus_px``
-  its radius), a response curve (``gamma``: grey = 255 (I / 255)^(1 / gamma)), then Gaussian
-  sensor noise and rounding to 8 bits.
+* a Gaussian blur (the lens's, beyond the pixel's area) and a defocus (the uniform disc of a thin
+  lens, ``defocus_px`` its radius), a response curve (``gamma``: grey = 255 (I / 255)^(1 /
+  gamma)), then Gaussian sensor noise and rounding to 8 bits.
 
 Speed (one 640x480 frame in a few ms): everything that depends only on the camera (the
 undistorted ray of every pixel), on the background and on the blur is computed once and cached; a
 frame starts as one of a few finished noisy backgrounds (uint8), and only a box around the ball is
 rendered, blurred and given fresh noise (outside it the noise repeats from frame to frame: nothing
-is measured there). ``sphere_in_optical`` places the ball in the optical frame from the effector
-position and the camera mounting (the hand_camera node).
+is measured there); a ball that has not moved since the last frame only gets fresh noise.
+``sphere_in_optical`` places the ball in the optical frame from the effector position and the
+camera mounting (the hand_camera node).
 """
 from dataclasses import dataclass
 import functools
@@ -33,8 +35,9 @@ import cv2
 import numpy as np
 from robotenis_vision.camera import Camera
 
-SUPERSAMPLE = 8               # rays per pixel side near the outline
-LIMB_BAND_PX = 4.0            # inside the outline: pixels shaded by their area, not centre
+FINE = 2                      # sub-pixels per pixel side where the ball is drawn
+SUPERSAMPLE = 8               # rays per sub-pixel side near the outline
+LIMB_BAND_PX = 4.0            # inside the outline: sub-pixels shaded by their area, not centre
 BANK = 8                      # finished background frames, one drawn per image
 
 
@@ -320,10 +323,12 @@ def _subsample_offsets(n=SUPERSAMPLE):
     return (off + 0.5) % 1.0 - 0.5
 
 
+# rays of a sub-pixel near the outline, and of its shading (a centred grid, 4 x 4 a pixel: a
+# subset of the coverage's would sit off centre, and shift the steep limb's shading by as much),
+# in sub-pixels; the sub-pixels' centres in a pixel, row by row
 _OFFSETS = _subsample_offsets()
-# the shading's rays: a centred 4 x 4 grid (a subset of the 8 x 8 would sit 0.06 px off centre,
-# and shift the steep limb's shading by as much)
-_SHADE_OFFSETS = _subsample_offsets(SUPERSAMPLE // 2)
+_SHADE_OFFSETS = _subsample_offsets(SUPERSAMPLE // (2 * FINE))
+_SUB = np.stack(np.meshgrid(*2 * [(np.arange(FINE) + 0.5) / FINE - 0.5]), -1).reshape(-1, 2)
 
 
 def _rays(x, y, dxy_du, dxy_dv, mask, offsets):
@@ -340,44 +345,48 @@ def _cone_value(x, y, C, cos2_beta):
     return np.where(dot > 0, dot * dot - cos2_beta * (C @ C) * (x * x + y * y + 1.0), -1.0)
 
 
-def _coverage_and_shade(camera, C, R, lighting, box):
-    """Return the fraction of each box pixel the sphere covers, and its brightness at the pixel."""
-    u0, u1, v0, v1 = box
-    xy, dxy_du, dxy_dv = (m[v0:v1, u0:u1] for m in _ray_maps(_camera_key(camera)))
-    x, y = xy[..., 0], xy[..., 1]
-    cos2_beta = 1.0 - R * R / (C @ C)
+def _outline_distance(x, y, dxy_du, dxy_dv, C, cos2_beta):
+    """
+    Return the cone value q and the signed distance to the outline, -q / |grad q| (outside > 0).
+
+    The gradient is q's along the pixel steps ``dxy_du``, ``dxy_dv`` (..., 2): the distance is
+    in those steps.
+    """
     q = _cone_value(x, y, C, cos2_beta)
-    gq_v, gq_u = np.gradient(q)
-    # signed distance to the outline, px (outside > 0)
-    dist = -q / np.maximum(np.hypot(gq_u, gq_v), 1e-300)
+    k = cos2_beta * (C @ C)
+    dot = x * C[0] + y * C[1] + C[2]
+    q_x, q_y = 2.0 * (dot * C[0] - k * x), 2.0 * (dot * C[1] - k * y)
+    q_u = q_x * dxy_du[..., 0] + q_y * dxy_du[..., 1]
+    q_v = q_x * dxy_dv[..., 0] + q_y * dxy_dv[..., 1]
+    return q, -q / np.maximum(np.hypot(q_u, q_v), 1e-300)
+
+
+def _sub_pixels(x, y, dxy_du, dxy_dv, C, R, lighting):
+    """
+    Return the fraction of each sub-pixel the sphere covers, and its mean brightness there.
+
+    (x, y) (n,): the sub-pixels' centre rays, ``dxy_du``, ``dxy_dv`` (n, 2) their steps. Those
+    the outline crosses are sampled by SUPERSAMPLE^2 rays; a pixel integrates the light over its
+    area, and near the limb the shading bends as a square root (its value at a pixel's centre is
+    0.4 grey levels brighter than the pixel's mean 1.5 px inside a frontally lit ball): the
+    shading is averaged over rays, and over the covered ones on the outline.
+    """
+    cos2_beta = 1.0 - R * R / (C @ C)
+    q, dist = _outline_distance(x, y, dxy_du, dxy_dv, C, cos2_beta)
     cover = (q > 0).astype(np.float32)
-    edge = np.abs(dist) < 0.8          # a pixel corner is 0.71 px from its centre
+    edge = np.abs(dist) < 0.8          # a sub-pixel's corner is 0.71 of its side from its centre
     sx, sy = _rays(x, y, dxy_du, dxy_dv, edge, _OFFSETS)
-    inside = _cone_value(sx, sy, C, cos2_beta) > 0
-    cover[edge] = np.mean(inside, axis=1)
-    shade = np.zeros(cover.shape, np.float32)
-    lit = (cover > 0) & ~edge
-    # A pixel integrates the light over its area: near the limb the shading bends as a square
-    # root, and its value at the centre is brighter than the pixel's mean (0.4 grey levels 1.5 px
-    # inside a frontally lit ball, falling as depth^-1.5: 0.10 at 4 px), which moved the
-    # measured outline by a hundredth of a pixel. Averaged over a 4 x 4 grid of rays there.
-    band = lit & (dist > -LIMB_BAND_PX)
-    bx, by = _rays(x, y, dxy_du, dxy_dv, band, _SHADE_OFFSETS)
-    shade[band] = np.mean(_shade(bx, by, C, R, lighting), axis=1)
-    deep = lit & ~band
-    shade[deep] = _shade(x[deep], y[deep], C, R, lighting)
-    # The shading of a pixel on the outline is the mean over its covered part (the limb brightens
-    # as a square root inward, so the centre's value would not do).
-    sx, sy = _rays(x, y, dxy_du, dxy_dv, edge, _SHADE_OFFSETS)
+    cover[edge] = np.mean(_cone_value(sx, sy, C, cos2_beta) > 0, axis=1)
+    lit = cover > 0
+    sx, sy = _rays(x, y, dxy_du, dxy_dv, lit, _SHADE_OFFSETS)
     hit = _cone_value(sx, sy, C, cos2_beta) > 0
-    values = _shade(sx, sy, C, R, lighting)
     count = hit.sum(axis=1)
-    mean = np.sum(values * hit, axis=1) / np.maximum(count, 1)
+    shade = np.zeros(cover.shape, np.float32)
+    shade[lit] = (np.sum(_shade(sx, sy, C, R, lighting) * hit, axis=1)
+                  / np.maximum(count, 1))
     # covered only between the shading rays: the limb at the centre
-    none = count == 0
-    if np.any(none):
-        mean[none] = _shade(x[edge][none], y[edge][none], C, R, lighting)
-    shade[edge] = mean
+    none = np.flatnonzero(lit)[count == 0]
+    shade[none] = _shade(x[none], y[none], C, R, lighting)
     return cover, shade
 
 
@@ -386,27 +395,106 @@ def _grow(box, m, camera):
     return max(u0 - m, 0), min(u1 + m, camera.width), max(v0 - m, 0), min(v1 + m, camera.height)
 
 
+def _ball_light(camera, C, R, lighting, background, box):
+    """
+    Return what the ball changes in the scene on FINE x FINE sub-pixels of its box (float32).
+
+    Pixels the outline crosses or within LIMB_BAND_PX inside it are drawn sub-pixel by sub-pixel;
+    deeper ones (smooth shading, beyond the blur's reach of the outline) by their centre's value.
+    """
+    n = FINE
+    u0, u1, v0, v1 = box
+    xy, dxy_du, dxy_dv = (m[v0:v1, u0:u1] for m in _ray_maps(_camera_key(camera)))
+    x, y = xy[..., 0], xy[..., 1]
+    raw = _raw_background(_camera_key(camera), background)[v0:v1, u0:u1]
+    q, dist = _outline_distance(x, y, dxy_du, dxy_dv, C, 1.0 - R * R / (C @ C))
+    band = (dist < 0.75) & (dist > -LIMB_BAND_PX - 0.75)
+    deep = (q > 0) & ~band
+    delta = np.zeros(raw.shape, np.float32)
+    delta[deep] = _shade(x[deep], y[deep], C, R, lighting) - raw[deep]
+    fine = np.repeat(np.repeat(delta, n, axis=0), n, axis=1)
+    sx, sy = _rays(x, y, dxy_du, dxy_dv, band, _SUB)
+    steps_u, steps_v = (np.repeat(d[band] / n, len(_SUB), axis=0) for d in (dxy_du, dxy_dv))
+    cover, shade = _sub_pixels(sx.ravel(), sy.ravel(), steps_u, steps_v, C, R, lighting)
+    rows, cols = np.nonzero(band)
+    sub = np.arange(len(_SUB))
+    fine[rows[:, None] * n + sub // n, cols[:, None] * n + sub % n] = (
+        cover * (shade - np.repeat(raw[band], len(_SUB)))).reshape(-1, len(_SUB))
+    return fine
+
+
+def _lens(fine, optics):
+    """
+    Return the lens's image on FINE x FINE sub-pixels (float32) integrated over each pixel.
+
+    The blur and the defocus disc are applied FINE times wider on the sub-pixels; the
+    sub-pixels' own area (variance 1 / (12 FINE^2) px^2) is taken out of the Gaussian's, so that
+    ``blur_sigma`` keeps its meaning, the blur beyond the pixel's area.
+    """
+    n = FINE
+    sigma = np.sqrt(max(optics.blur_sigma ** 2 - 1.0 / (12 * n * n), 0.0))
+    fine = _blur(fine, Optics(n * sigma, n * optics.defocus_px, 1.0))
+    return fine.reshape(fine.shape[0] // n, n, fine.shape[1] // n, n).mean(axis=(1, 3))
+
+
+class _Still:
+    """
+    The last frame's noise-free patch, kept for the next if the ball has not moved.
+
+    A robot at rest holds the ball within a nanometre (a few millionths of a pixel) for many
+    frames, each of which needs only fresh noise.
+    """
+
+    TOLERANCE = 1e-9    # m
+
+    def __init__(self):
+        self.key, self.C, self.patch = None, None, None
+
+    def get(self, key, C):
+        same = (key == self.key and np.max(np.abs(C - self.C)) <= self.TOLERANCE)
+        return self.patch if same else None
+
+    def put(self, key, C, patch):
+        self.key, self.C, self.patch = key, C.copy(), patch
+
+
+_STILL = _Still()
+
+
 def _draw_sphere(frame, camera, C, R, lighting, background, optics, noise_sigma, rng, box):
     """
     Render the ball in its box, blur, add fresh noise and write the result into the frame.
 
-    With m the blur's radius: the blurred ball reaches m beyond its box, and blurring that needs m
-    more of the unblurred background; the outer ring takes the cached blurred background instead.
+    A pixel integrates the lens's blurred image over its area. The ball and what lies behind it
+    are drawn on FINE x FINE sub-pixels, blurred there and each pixel's sub-pixels averaged
+    (``_lens``): a Gaussian as narrow as the lens's (0.8 px) sampled once a pixel, applied to
+    pixels that already integrate a sharp outline, moves the blurred outline by a few
+    thousandths of a pixel with its phase on the grid (0.015-0.02 mm of depth at 0.2-0.4 m on
+    noise-free renders of a flat disc), which no camera does. With m the blur's radius, the
+    blurred ball reaches m beyond its box, and blurring that needs m more of the background;
+    beyond the m, the frame's cached background, blurred a pixel at a time, which differs from
+    the sub-pixels' by up to 0.2 grey levels on the default gradient and 1.3 on a checkerboard,
+    6 px or more outside the outline, beyond any fit's annulus.
     """
     m = _kernel_radius(optics)
     near, far = _grow(box, m, camera), _grow(box, 2 * m, camera)
-    cover, shade = _coverage_and_shade(camera, C, R, lighting, box)
-    key = _camera_key(camera)
-    raw = _raw_background(key, background)[far[2]:far[3], far[0]:far[1]].copy()
-    b = (slice(box[2] - far[2], box[3] - far[2]), slice(box[0] - far[0], box[1] - far[0]))
-    raw[b] += cover * (shade - raw[b])
-    patch = _respond(_blur(raw, optics), optics.gamma)
-    out = _blurred_background(key, background, optics)[far[2]:far[3], far[0]:far[1]].copy()
-    n = (slice(near[2] - far[2], near[3] - far[2]), slice(near[0] - far[0], near[1] - far[0]))
-    out[n] = patch[n]
-    if noise_sigma > 0:
-        out += noise_sigma * rng.standard_normal(out.shape, dtype=np.float32)
-    frame[far[2]:far[3], far[0]:far[1]] = _to_uint8(out)
+    key = (_camera_key(camera), R, lighting, background, optics, box)
+    out = _STILL.get(key, C)
+    if out is None:
+        n = FINE
+        raw = _raw_background(_camera_key(camera), background)[far[2]:far[3], far[0]:far[1]]
+        fine = np.repeat(np.repeat(raw, n, axis=0), n, axis=1)
+        top, left = (box[2] - far[2]) * n, (box[0] - far[0]) * n
+        ball = _ball_light(camera, C, R, lighting, background, box)
+        fine[top:top + ball.shape[0], left:left + ball.shape[1]] += ball
+        patch = _lens(fine, optics)[near[2] - far[2]:near[3] - far[2],
+                                    near[0] - far[0]:near[1] - far[0]]
+        out = _respond(patch, optics.gamma)
+        _STILL.put(key, C, out)
+    # a new array either way: the kept patch must not be clipped in place
+    out = out + (noise_sigma * rng.standard_normal(out.shape, dtype=np.float32)
+                 if noise_sigma > 0 else 0.0)
+    frame[near[2]:near[3], near[0]:near[1]] = _to_uint8(out)
 
 
 def sphere_in_optical(P, ball, camera_rotation, camera_translation):
