@@ -477,7 +477,10 @@ def _draw_sphere(frame, camera, C, R, lighting, background, optics, noise_sigma,
     blurred ball reaches m beyond its box, and blurring that needs m more of the background;
     beyond the m, the frame's cached background, blurred a pixel at a time, which differs from
     the sub-pixels' by up to 0.2 grey levels on the default gradient and 1.3 on a checkerboard,
-    6 px or more outside the outline, beyond any fit's annulus.
+    6 px or more outside the outline, beyond any fit's annulus. Fresh noise goes over the whole
+    box grown by 2 m (the frame's own repeats from frame to frame): given over the inner box
+    alone, a ring the detector reads carried the same noise in every frame, and the first 60
+    scenes of ``bench vision`` read a depth bias of 0.229 % of range against 0.170 %.
     """
     m = _kernel_radius(optics)
     near, far = _grow(box, m, camera), _grow(box, 2 * m, camera)
@@ -490,14 +493,16 @@ def _draw_sphere(frame, camera, C, R, lighting, background, optics, noise_sigma,
         top, left = (box[2] - far[2]) * n, (box[0] - far[0]) * n
         ball = _ball_light(camera, C, R, lighting, background, box)
         fine[top:top + ball.shape[0], left:left + ball.shape[1]] += ball
-        patch = _lens(fine, optics)[near[2] - far[2]:near[3] - far[2],
-                                    near[0] - far[0]:near[1] - far[0]]
-        out = _respond(patch, optics.gamma)
+        inner = (slice(near[2] - far[2], near[3] - far[2]),
+                 slice(near[0] - far[0], near[1] - far[0]))
+        out = _blurred_background(_camera_key(camera), background, optics)[
+            far[2]:far[3], far[0]:far[1]].copy()
+        out[inner] = _respond(_lens(fine, optics)[inner], optics.gamma)
         _STILL.put(key, C, out)
     # a new array either way: the kept patch must not be clipped in place
     out = out + (noise_sigma * rng.standard_normal(out.shape, dtype=np.float32)
                  if noise_sigma > 0 else 0.0)
-    frame[near[2]:near[3], near[0]:near[1]] = _to_uint8(out)
+    frame[far[2]:far[3], far[0]:far[1]] = _to_uint8(out)
 
 
 def sphere_in_optical(P, ball, camera_rotation, camera_translation):

@@ -93,7 +93,7 @@ def test_the_blurred_outline_does_not_move_with_its_phase_on_the_pixel_grid():
     scaled by the fits' variances (the mean's share taken out) must sum as chi2(23). A Gaussian
     of 0.8 px sampled once a pixel and applied to pixels that integrate a sharp outline (the
     renderer before) moved the outline with its phase on the grid: sums of 50-89 on four seeds
-    (the bound 49.7), 16-40 drawn on sub-pixels.
+    (the bound 49.7), 19-40 drawn on sub-pixels.
     """
     light = cm.Lighting(direction=(0.0, 0.0, -1.0), ambient=160.0, diffuse=0.0, specular=0.0)
     flat = cm.Background(low=60.0, high=60.0, texture=0.0)
