@@ -396,6 +396,11 @@ def _grow(box, m, camera):
     return max(u0 - m, 0), min(u1 + m, camera.width), max(v0 - m, 0), min(v1 + m, camera.height)
 
 
+def _on_sub_pixels(a):
+    """Return the pixels of ``a`` (h, w) each repeated over its FINE x FINE sub-pixels."""
+    return np.repeat(np.repeat(a, FINE, axis=0), FINE, axis=1)
+
+
 def _ball_light(camera, C, R, lighting, background, box):
     """
     Return what the ball changes in the scene on FINE x FINE sub-pixels of its box (float32).
@@ -413,7 +418,7 @@ def _ball_light(camera, C, R, lighting, background, box):
     deep = (q > 0) & ~band
     delta = np.zeros(raw.shape, np.float32)
     delta[deep] = _shade(x[deep], y[deep], C, R, lighting) - raw[deep]
-    fine = np.repeat(np.repeat(delta, n, axis=0), n, axis=1)
+    fine = _on_sub_pixels(delta)
     sx, sy = _rays(x, y, dxy_du, dxy_dv, band, _SUB)
     steps_u, steps_v = (np.repeat(d[band] / n, len(_SUB), axis=0) for d in (dxy_du, dxy_dv))
     cover, shade = _sub_pixels(sx.ravel(), sy.ravel(), steps_u, steps_v, C, R, lighting)
@@ -484,18 +489,18 @@ def _draw_sphere(frame, camera, C, R, lighting, background, optics, noise_sigma,
     """
     m = _kernel_radius(optics)
     near, far = _grow(box, m, camera), _grow(box, 2 * m, camera)
-    key = (_camera_key(camera), R, lighting, background, optics, box)
+    camera_key = _camera_key(camera)
+    key = (camera_key, R, lighting, background, optics, box)
     out = _STILL.get(key, C)
     if out is None:
-        n = FINE
-        raw = _raw_background(_camera_key(camera), background)[far[2]:far[3], far[0]:far[1]]
-        fine = np.repeat(np.repeat(raw, n, axis=0), n, axis=1)
-        top, left = (box[2] - far[2]) * n, (box[0] - far[0]) * n
+        raw = _raw_background(camera_key, background)[far[2]:far[3], far[0]:far[1]]
+        fine = _on_sub_pixels(raw)
+        top, left = (box[2] - far[2]) * FINE, (box[0] - far[0]) * FINE
         ball = _ball_light(camera, C, R, lighting, background, box)
         fine[top:top + ball.shape[0], left:left + ball.shape[1]] += ball
         inner = (slice(near[2] - far[2], near[3] - far[2]),
                  slice(near[0] - far[0], near[1] - far[0]))
-        out = _blurred_background(_camera_key(camera), background, optics)[
+        out = _blurred_background(camera_key, background, optics)[
             far[2]:far[3], far[0]:far[1]].copy()
         out[inner] = _respond(_lens(fine, optics)[inner], optics.gamma)
         _STILL.put(key, C, out)
