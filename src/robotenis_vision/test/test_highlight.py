@@ -60,7 +60,7 @@ def test_a_mean_image_at_rest_is_fitted_with_its_own_lobe():
     As the node measures a rest: the first frame by the conic, then fitted from there, then the
     mean of 16 more frames seeded by that fit. It must land where the same mean image's fit
     seeded at the true ball lands: their difference within the fit's 99 % ellipsoid (chi2(3)).
-    With the first frame's lobe carried to the mean image, this ball at 0.4 m read 0.21-0.27 mm
+    With the first frame's lobe carried to the mean image, this ball 0.415 m away read 0.21-0.27 mm
     nearer than with the mean's own lobe in 3 of these 6 rests (chi2 235-262), for a standard
     deviation of 0.04 mm along the line of sight.
     """
