@@ -104,22 +104,26 @@ def plannable(declared, sphere_guess, P, max_range=PLAN_RANGE[1], field=1.0):
         & (np.abs(y) <= half_y * z)
 
 
-def visible_candidates(declared, sphere_guess, n, rng, band=None, batch=20000, max_batches=200,
+def visible_candidates(declared, sphere_guess, n, rng, band=None, batch=20000, max_batches=400,
                        max_range=PLAN_RANGE[1], field=1.0):
-    """Draw ``n`` random workspace positions (n, 3) the camera should see, else ValueError."""
+    """
+    Draw ``n`` random workspace positions (n, 3) the camera should see, else ValueError.
+
+    Up to ``max_batches`` rounds of ``batch`` uniform draws in the workspace's cylinder; the
+    visibility test (``plannable``) comes before the workspace's, which costs an inverse
+    kinematics and an SVD per position and would otherwise be paid by the few hundred
+    positions drawn for each one the camera sees.
+    """
     if not PLAN_RANGE[0] < max_range:
         raise ValueError(f'max_range: must exceed the nearest planned range {PLAN_RANGE[0]} m, '
                          f'got {max_range}')
-    out, count = [], 0
-    for _ in range(max_batches):
-        P = workspace.sample(declared, batch, rng, band=band)
-        P = P[plannable(declared, sphere_guess, P, max_range, field)]
-        out.append(P)
-        count += len(P)
-        if count >= n:
-            return np.concatenate(out)[:n]
-    raise ValueError(f'only {count} plannable poses found near the ball guess {sphere_guess}: '
-                     "move the ball into the camera's reach")
+    P = workspace.sample(
+        declared, n, rng, band=band, batch=batch, max_batches=max_batches,
+        where=lambda P: plannable(declared, sphere_guess, P, max_range, field))
+    if len(P) < n:
+        raise ValueError(f'only {len(P)} plannable poses found near the ball guess '
+                         f"{sphere_guess}: move the ball into the camera's reach")
+    return P
 
 
 def boundary(declared, sphere_guess, n, rng, max_range=PLAN_RANGE[1]):

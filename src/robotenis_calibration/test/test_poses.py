@@ -29,7 +29,11 @@ def test_the_refined_guess_is_where_the_rests_saw_the_ball():
 
 
 def test_poses_keep_the_ball_within_max_range():
-    """Both selections plan the ball within max_range; a max_range below the nearest is refused."""
+    """
+    Both selections plan the ball within max_range; a max_range below the nearest is refused.
+
+    So is a ball guess that no pose of the workspace sees, after a bounded search.
+    """
     truth, declared = sim_truth.load(), description.nominal()
     guess = truth.sphere_position - truth.camera_translation
     for method in poses.SELECTIONS:
@@ -38,6 +42,9 @@ def test_poses_keep_the_ball_within_max_range():
         assert np.all((z >= poses.PLAN_RANGE[0]) & (z <= 0.35))
     with pytest.raises(ValueError, match='max_range'):
         poses.boundary(declared, guess, 10, np.random.default_rng(4), max_range=0.15)
+    with pytest.raises(ValueError, match="move the ball into the camera's reach"):
+        poses.select('discriminating', declared, guess + [0.0, 0.0, 2.0], 40,
+                     np.random.default_rng(4))
 
 
 def test_the_central_pose_comes_first_and_sees_the_ball_through_a_wrong_depth():

@@ -38,7 +38,8 @@ class Workspace:
         return ok & (cond >= self.min_parallel_conditioning)
 
 
-def sample(desc, n, rng, workspace=Workspace(), band=None, batch=4096):
+def sample(desc, n, rng, workspace=Workspace(), band=None, batch=4096, where=None,
+           max_batches=None):
     """
     Draw ``n`` positions (n, 3) uniformly from the usable workspace.
 
@@ -57,15 +58,26 @@ def sample(desc, n, rng, workspace=Workspace(), band=None, batch=4096):
         (``delta.singularity_distance``) lies in [band[0], band[1]] m: the paper's 5-10 cm shell.
     batch : int
         Candidate positions drawn per round.
+    where : callable or None
+        If given, keep only positions P (k, 3) with ``where(P)`` true: uniform draws from the
+        part of the workspace it selects. It is tested before the workspace itself, so a cheap
+        test that rejects most draws spares their inverse kinematics.
+    max_batches : int or None
+        If given, stop after this many rounds and return the positions found, fewer than ``n``
+        if the region is too small.
 
     """
     out = []
     count = 0
-    while count < n:
+    rounds = 0
+    while count < n and (max_batches is None or rounds < max_batches):
+        rounds += 1
         r = workspace.radius * np.sqrt(rng.uniform(size=batch))
         a = rng.uniform(0, 2 * np.pi, size=batch)
         z = rng.uniform(workspace.z_min, workspace.z_max, size=batch)
         P = np.stack([r * np.cos(a), r * np.sin(a), z], axis=-1)
+        if where is not None:
+            P = P[where(P)]
         P = P[workspace.contains(desc, P)]
         if band is not None and len(P):
             s = delta.singularity_distance(desc, P)

@@ -1,12 +1,32 @@
 import numpy as np
 import pytest
-
 from robotenis_kinematics import delta, workspace
+from scipy import stats
 
 
 @pytest.fixture
 def poses(nominal):
     return workspace.sample(nominal, 2000, np.random.default_rng(7))
+
+
+def test_a_where_test_draws_from_the_workspace_part_it_selects(nominal):
+    """
+    Drawing with ``where`` is drawing from the workspace and keeping what ``where`` selects.
+
+    A two-sample Kolmogorov-Smirnov test per coordinate at 0.1 % (Bonferroni over the three);
+    a region that holds nothing returns an empty draw after ``max_batches`` rounds.
+    """
+    def off_centre(P):
+        return P[:, 0] > 0.1
+    inside = workspace.sample(nominal, 1500, np.random.default_rng(5), where=off_centre)
+    assert np.all(off_centre(inside)) and np.all(workspace.Workspace().contains(nominal, inside))
+    kept = workspace.sample(nominal, 8000, np.random.default_rng(6))
+    kept = kept[off_centre(kept)]
+    for j in range(3):
+        assert stats.ks_2samp(inside[:, j], kept[:, j]).pvalue > 0.001 / 3
+    nothing = workspace.sample(nominal, 10, np.random.default_rng(5), max_batches=3,
+                               where=lambda P: P[:, 2] < 0)
+    assert nothing.shape == (0, 3)
 
 
 def test_fk_inverts_ik_over_the_workspace(nominal, table1, poses):
