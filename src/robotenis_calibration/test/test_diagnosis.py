@@ -72,24 +72,31 @@ def test_no_effect_is_claimed_on_clean_data_at_the_stated_rate(setting):
 
 
 @pytest.mark.parametrize('name', list(OUTSIDE_LIBRARY))
-def test_an_effect_outside_the_library_is_never_named(setting, name):
+def test_an_effect_outside_the_library_is_named_at_most_at_the_stated_rate(setting, name):
     """
-    Over 5 seeds (sessions with a rest floor): no named effect is ever claimed.
+    Over 5 seeds (sessions with a rest floor): a named effect is claimed at the loop's level.
 
-    The generic model of the effect's kind stands in at least 4 (what an error of this size
-    gives: measured 7-8 of 8 over seeds 100-107, benchmarks/calibrate.py), and wherever it does
-    the held-out poses are predicted better than by the plain fit.
+    At most in the binomial 99.9 % quantile of sessions at ALPHA (one of five): a named effect's
+    score test is run beside the generic model's, so it is claimed by chance as on clean data
+    (an eccentricity, three pose sets of 300 boundary poses, seeds 20-35: joint_scale beside
+    joint_harmonics in 1 of 96 sessions). The generic model of the effect's kind stands in at
+    least 4 (what an error of this size gives: measured 7-8 of 8 over seeds 100-107,
+    benchmarks/calibrate.py), and wherever it does the held-out poses are predicted better than
+    by the plain fit.
     """
     nominal, truth, P = setting
     effect, generic = OUTSIDE_LIBRARY[name]
     truth = sim_truth.with_effects(truth, **effect)
-    found = []
-    for seed in range(20, 25):
+    found, claims = [], 0
+    seeds = range(20, 25)
+    for seed in seeds:
         d = diagnose(session(truth, nominal, P, seed, FLOOR), seed)
-        assert not set(d.effects) & set(diagnosis.NAMED), (seed, d.effects)
-        if d.effects == [generic]:
+        claims += bool(set(d.effects) & set(diagnosis.NAMED))
+        if generic in d.effects:
             found.append(seed)
+        if d.effects == [generic]:
             assert d.errors_mm['final'] < d.errors_mm['plain'], seed
+    assert claims <= stats.binom.ppf(0.999, len(seeds), diagnosis.ALPHA)
     assert len(found) >= 4, found
 
 
