@@ -64,6 +64,9 @@ def section_identification(nominal, truth, n, seed):
     return text, fit
 
 
+ISO_EFFECT = 'joint_scale'   # the undeclared effect of the robot the static tests run on
+
+
 def image_run(robot, nominal, n, seed):
     """
     Return (session, diagnosis) of a session through rendered images, planned as the node plans.
@@ -71,25 +74,32 @@ def image_run(robot, nominal, n, seed):
     Each rest is measured through rendered images as the sphere_detector node measures it,
     emulated without the robot's dynamics (study.static_run's ``images``: its frames' noise and
     the detector's error at rest; the live chain's rests differ from it by noise: live_links),
-    the ball planned within poses.IMAGE_MAX_RANGE around where the first rests see it.
+    the poses planned as a session's request that names none is (poses.SESSION_SELECTION), the
+    ball within poses.IMAGE_MAX_RANGE around where the first rests see it.
     """
-    s, _, d = study.static_run(robot, nominal, n, seed, guess_error=-robot.camera_translation,
-                               images=True, max_range=poses.IMAGE_MAX_RANGE)
+    s, _, d = study.static_run(robot, nominal, n, seed, poses.SESSION_SELECTION,
+                               -robot.camera_translation, images=True,
+                               max_range=poses.IMAGE_MAX_RANGE)
     return s, d
 
 
-def image_sessions(truth, nominal, n, seeds):
-    """Return {(effect, seed): image_run} for each studied effect, one process per core."""
-    with ProcessPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
-        runs = {(name, seed): pool.submit(image_run, sim_truth.with_effects(truth, **effect),
-                                          nominal, n, 100 + seed)
-                for name, effect in STUDY.items() for seed in range(seeds)}
-        return {key: run.result() for key, run in runs.items()}
+def image_sessions(pool, truth, nominal, n, image_poses, image_seeds):
+    """
+    Submit to ``pool`` every session through rendered images the report uses; their futures.
+
+    {(effect, seed): image_run} for each studied effect (``image_poses`` each), and under
+    'static' the static tests' (``n`` poses on the robot with ISO_EFFECT), submitted first: the
+    longest. They are rendered and measured while the report computes its other sections.
+    """
+    jobs = {'static': (sim_truth.with_effects(truth, **STUDY[ISO_EFFECT]), nominal, n, 7)}
+    jobs.update({(name, seed): (sim_truth.with_effects(truth, **effect), nominal, image_poses,
+                                100 + seed)
+                 for name, effect in STUDY.items() for seed in range(image_seeds)})
+    return {key: pool.submit(image_run, *args) for key, args in jobs.items()}
 
 
-def section_residual_loop(nominal, truth, n, seeds, out_dir, image_poses, image_seeds):
+def section_residual_loop(nominal, truth, n, seeds, out_dir, images, image_poses, image_seeds):
     rows, plot = [], None
-    images = image_sessions(truth, nominal, image_poses, image_seeds)
     for name, effect in STUDY.items():
         robot = sim_truth.with_effects(truth, **effect)
         found, errors = [], []
@@ -105,7 +115,7 @@ def section_residual_loop(nominal, truth, n, seeds, out_dir, image_poses, image_
         e = np.mean(errors, axis=0)
         seen, held_out, at_rests = [], [], []
         for seed in range(image_seeds):
-            s, d = images[name, seed]
+            s, d = images[name, seed].result()
             seen.append(d.effects == ([name] if effect else []))
             held_out.append(d.errors_mm['final'])
             # a static session's sides are the truth's and the calibration's alike
@@ -181,19 +191,18 @@ def section_session(bag_dir, out_dir):
             f'</pre><p><img src="{os.path.basename(outcome.plot_path)}" width="100%"></p>')
 
 
-ISO_EFFECT = 'joint_scale'   # the undeclared effect of the robot the static tests run on
-
-
-def section_static(nominal, truth, n, quick, out_dir, say):
+def section_static(nominal, truth, n, quick, out_dir, static_images, say):
     """
     Report section 6.1 on a robot whose truth carries an undeclared gear error.
 
-    Table 4 and Figures 9-10.
+    Table 4 and Figures 9-10. ``static_images``: the same session through rendered images
+    (image_sessions' 'static' future).
     """
     robot = sim_truth.with_effects(truth, **STUDY[ISO_EFFECT])
     _, _, d = study.static_run(robot, nominal, n, 7)
-    say(f'calibrating through rendered images ({n} poses)')
-    images, d_images = image_run(robot, nominal, n, 7)
+    if not static_images.done():
+        say(f'waiting for the same session through rendered images ({n} poses)')
+    images, d_images = static_images.result()
     models = {'nominal': nominal, 'plain 15-parameter': d.plain.model.desc,
               'final (residual loop)': result.calibrated_description(d, nominal),
               'plain, through images': d_images.plain.model.desc,
@@ -288,24 +297,28 @@ def build(out_dir, quick=False, session=None, say=print):
     image_poses, image_seeds = 90, (1 if quick else 3)
     started = time.perf_counter()
     parts = []
-    say('identification beside Table 1')
-    text, fit = section_identification(nominal, truth, n, 1)
-    parts.append(("Identification beside the paper's Table 1", text))
-    say(f'residual loop on each undeclared effect ({seeds} sessions each)')
-    parts.append(('The residual loop: finding what the model lacks',
-                  section_residual_loop(nominal, truth, n, seeds, out_dir, image_poses,
-                                        image_seeds)))
-    say('pose selection: boundary against optimal')
-    parts.append(('Choosing the poses',
-                  section_pose_selection(nominal, truth, n, max(1, seeds // 2))))
-    say('Jacobian study')
-    parts.append(('The Jacobian study (section 6.2.1)', section_jacobian(nominal, fit, out_dir)))
-    if session:
-        say(f'calibrating the session {session}')
-        parts.append(('A recorded session', section_session(session, out_dir)))
-    say('static tests (ISO 9283)')
-    parts.append(('Static tests, ISO 9283 (section 6.1)',
-                  section_static(nominal, truth, n, quick, out_dir, say)))
+    with ProcessPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
+        images = image_sessions(pool, truth, nominal, n, image_poses, image_seeds)
+        say(f'{len(images)} sessions through rendered images: measured in the background')
+        say('identification beside Table 1')
+        text, fit = section_identification(nominal, truth, n, 1)
+        parts.append(("Identification beside the paper's Table 1", text))
+        say(f'residual loop on each undeclared effect ({seeds} sessions each)')
+        parts.append(('The residual loop: finding what the model lacks',
+                      section_residual_loop(nominal, truth, n, seeds, out_dir, images,
+                                            image_poses, image_seeds)))
+        say('pose selection: boundary against optimal')
+        parts.append(('Choosing the poses',
+                      section_pose_selection(nominal, truth, n, max(1, seeds // 2))))
+        say('Jacobian study')
+        parts.append(('The Jacobian study (section 6.2.1)',
+                      section_jacobian(nominal, fit, out_dir)))
+        if session:
+            say(f'calibrating the session {session}')
+            parts.append(('A recorded session', section_session(session, out_dir)))
+        say('static tests (ISO 9283)')
+        parts.append(('Static tests, ISO 9283 (section 6.1)',
+                      section_static(nominal, truth, n, quick, out_dir, images['static'], say)))
     say('tracking tests (Table 5)')
     parts.append(('Tracking (section 6.2.2)', section_tracking(quick, out_dir)))
     body = ''.join(f'<h2>{html.escape(title)}</h2>{text}' for title, text in parts)
