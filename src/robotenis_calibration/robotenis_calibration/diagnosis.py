@@ -81,7 +81,10 @@ def generic_terms(name, size):
 def candidate_parameters(name, size=None):
     """Return the parameter names a candidate proposes (before the identifiability check)."""
     if name == 'base_geometry':
-        return ('H1', 'H2', 'H3', 'phi1', 'phi2', 'phi3')
+        # phi1 stays as declared: it sets the base frame's yaw (x along leg 1). Free, it turns the
+        # whole robot about z, which to the hand camera is its own turn about z (the rotation
+        # vector's z of hand_eye_rotation) with the ball moved: no pose tells them apart.
+        return ('H1', 'H2', 'H3', 'phi2', 'phi3')
     if name == 'camera_field' and isinstance(size, tuple):
         return size
     if name in GENERIC:

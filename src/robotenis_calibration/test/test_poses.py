@@ -81,7 +81,7 @@ def effect_information(declared, P):
     model = idf.Model(model.desc, model.P0, {n: np.zeros(3) for n in poses.DISCRIMINATED
                                              if n != 'base_geometry'})
     # the base's H beside h is not identifiable on any poses: the base is its angles here
-    blocks = {n: ('phi1', 'phi2', 'phi3') if n == 'base_geometry'
+    blocks = {n: ('phi2', 'phi3') if n == 'base_geometry'
               else diagnosis.candidate_parameters(n) for n in poses.DISCRIMINATED}
     names = idf.PAPER_PARAMETERS + tuple(p for b in blocks.values() for p in b)
     rows = poses.pose_rows(model, synthetic.measure(declared, P), names)

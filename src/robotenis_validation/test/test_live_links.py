@@ -166,23 +166,6 @@ def test_the_bias_sources_render_and_change_the_bias():
         assert np.all(np.isfinite(bias)) and not np.allclose(bias, default), label
 
 
-def test_effects_the_poses_cannot_tell_apart_are_reported_together():
-    """
-    Report the named effects that the poses cannot tell apart together.
-
-    Through rendered images, 90 poses within 0.4 m: the detector's bias leaves hand_eye_rotation
-    and base_geometry each explaining what the other does. Whichever is claimed, the result names
-    the other beside it (neither adds to the other), never silently drops the truth's.
-    """
-    robot = sim_truth.with_effects(sim_truth.load(), **scenarios.EFFECTS['hand_eye_rotation'])
-    _, _, d = study.static_run(robot, description.nominal(), 90, 2, images=True,
-                               max_range=0.4)
-    claimed = d.effects + [n for names in d.indistinguishable.values() for n in names]
-    assert 'hand_eye_rotation' in claimed
-    assert d.indistinguishable and all(
-        step.equivalent for step in d.steps if step.chosen in d.indistinguishable)
-
-
 def test_a_description_that_cannot_assemble_the_robot_somewhere_scores_inf():
     """workspace_error_mm: FK that fails at a pose where the robot goes is no finite error."""
     truth, nominal = sim_truth.load(), description.nominal()
