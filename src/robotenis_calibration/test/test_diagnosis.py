@@ -78,7 +78,7 @@ def test_an_effect_outside_the_library_is_named_at_most_at_the_stated_rate(setti
 
     At most in the binomial 99.9 % quantile of sessions at ALPHA (one of five): a named effect's
     score test is run beside the generic model's, so it is claimed by chance as on clean data
-    (an eccentricity, three pose sets of 300 boundary poses, seeds 20-35: joint_scale beside
+    (an eccentricity, six pose sets of 300 boundary poses, seeds 20-35: joint_scale beside
     joint_harmonics in 1 of 96 sessions). The generic model of the effect's kind stands in at
     least 4 (what an error of this size gives: measured 7-8 of 8 over seeds 100-107,
     benchmarks/calibrate.py), and wherever it does the held-out poses are predicted better than
