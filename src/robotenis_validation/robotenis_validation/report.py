@@ -10,9 +10,9 @@ tests are calibrated twice: from rests measured through the noise model, and thr
 images and the product's detector as the live session measures them (the paper's own chain,
 which the figures set beside the paper's come from). ``--session`` adds the calibration of a
 recorded bag.
-``--quick`` uses fewer poses and seeds (for CI: 279 s here under a profiler, on 2 cores with
-nothing else running; its sessions through rendered images take most of it, a process per core,
-while the other sections run).
+``--quick`` uses fewer poses and seeds (for CI: 374 s in a clean-clone CI run on 2 cores; its
+sessions through rendered images take most of it, a process per core, while the other sections
+run).
 """
 import argparse
 from concurrent.futures import ProcessPoolExecutor
