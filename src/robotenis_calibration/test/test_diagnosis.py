@@ -193,10 +193,11 @@ def test_the_bases_yaw_is_the_cameras_so_the_base_keeps_phi1(setting):
     model = synthetic.true_model(nominal)
     model = idf.Model(model.desc, model.P0, {'hand_eye_rotation': np.zeros(3)})
     rotation = tuple(f'hand_eye_rotation{i}' for i in (1, 2, 3))
+    meas = synthetic.measure(nominal, P)
     smallest = {}
     for base in (('phi1', 'phi2', 'phi3'), diagnosis.candidate_parameters('base_geometry')):
         names = idf.PAPER_PARAMETERS + tuple(p for p in base if p.startswith('phi')) + rotation
-        J = poses.pose_rows(model, synthetic.measure(nominal, P), names).reshape(-1, len(names))
+        J = poses.pose_rows(model, meas, names).reshape(-1, len(names))
         sv = np.linalg.svd(J / np.linalg.norm(J, axis=0), compute_uv=False)
         smallest[len(names)] = sv[-1] / sv[0]
     assert smallest[21] < 1e-12 and smallest[20] > 1e-5
