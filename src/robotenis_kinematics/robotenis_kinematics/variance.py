@@ -7,8 +7,10 @@ error: each rest has an error of its own. Its variance (the *floor*) is a sum of
 to the covariances of every rest's measurements:
 
 * ``camera_x``, ``camera_y``, ``camera_z``: a constant variance along each optical axis (m^2);
-* ``camera_x_range``, ... : a variance growing with the range, (z / z_ref)^2 times the component,
-  as a detector's depth error does (z_ref = effects.CAMERA_REFERENCE_RANGE);
+* ``camera_x_range``, ... : a variance growing with the range z, (z / z_ref)^(2 m) times the
+  component (z_ref = effects.CAMERA_REFERENCE_RANGE), m = ``RANGE_POWER`` of the axis: what a
+  detector's error of a fixed size in pixels becomes. An error of e px in the outline's centre
+  moves the ball z e / f sideways (m = 1), one in its radius z^2 e / (f R) in depth (m = 2);
 * ``resolver``: a variance of each resolver increment (rad^2).
 
 With V_k = V0_k + sum_j phi_j G_kj the covariance of pose k's three constraint residuals (V0_k
@@ -33,6 +35,7 @@ from robotenis_kinematics import identification as idf
 
 COMPONENTS = ('camera_x', 'camera_y', 'camera_z', 'camera_x_range', 'camera_y_range',
               'camera_z_range', 'resolver')
+RANGE_POWER = {'x': 1, 'y': 1, 'z': 2}
 UNITS = {name: ('rad^2' if name == 'resolver' else 'm^2') for name in COMPONENTS}
 
 
@@ -52,18 +55,23 @@ class Floor:
         return replace(meas, sigma_Theta=sigma, cov_Pi=cov)
 
     def _camera_variances(self, meas, R):
-        grow = (ranges(meas, R) / effects.CAMERA_REFERENCE_RANGE) ** 2
+        grow = ranges(meas, R) / effects.CAMERA_REFERENCE_RANGE
         out = np.zeros((len(meas), 3))
         for a, axis in enumerate('xyz'):
             out[:, a] = (self.variances.get(f'camera_{axis}', 0.0)
-                         + grow * self.variances.get(f'camera_{axis}_range', 0.0))
+                         + grow ** (2 * RANGE_POWER[axis])
+                         * self.variances.get(f'camera_{axis}_range', 0.0))
         return out
 
     def as_dict(self):
         """Return the floor as plain data for a result file (SI units, standard deviations)."""
-        return {name: {'variance': float(self.variances.get(name, 0.0)),
-                       'variance_std': float(self.std.get(name, 0.0)), 'unit': UNITS[name]}
-                for name in COMPONENTS}
+        out = {name: {'variance': float(self.variances.get(name, 0.0)),
+                      'variance_std': float(self.std.get(name, 0.0)), 'unit': UNITS[name]}
+               for name in COMPONENTS}
+        for axis, power in RANGE_POWER.items():
+            out[f'camera_{axis}_range']['times'] = (
+                f'(z / {effects.CAMERA_REFERENCE_RANGE} m)^{2 * power}')
+        return out
 
     @classmethod
     def from_dict(cls, data):
@@ -101,8 +109,9 @@ def _blocks(model, meas, names, components):
                 vectors.append(parts['theta'] * np.eye(3)[i])
                 owner.append(j)
         else:
-            a = 'xyz'.index(name[len('camera_')])
-            vectors.append(A[:, a] * (grow[:, None] if name.endswith('_range') else 1.0))
+            axis = name[len('camera_')]
+            scale = grow[:, None] ** RANGE_POWER[axis] if name.endswith('_range') else 1.0
+            vectors.append(A[:, 'xyz'.index(axis)] * scale)
             owner.append(j)
     S = np.zeros((len(owner), len(components)))
     S[np.arange(len(owner)), owner] = 1.0

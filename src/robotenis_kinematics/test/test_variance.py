@@ -86,3 +86,22 @@ def test_the_floor_found_predicts_held_out_rests_and_its_large_components(sessio
     assert stats.chi2.ppf(0.005, dof) < chi2 < stats.chi2.ppf(0.995, dof), (chi2, dof)
     for name, values in z.items():
         assert abs(np.mean(values)) < 3 / np.sqrt(len(values)), (name, values)
+
+
+def test_the_range_components_grow_as_an_error_in_pixels_does():
+    """
+    An outline's error of e px is z e / f sideways and z^2 e / (f R) deep: twice as far, 2x and 4x.
+
+    The widened covariance of a rest at 2 z_ref carries 4x the lateral components' variance and
+    16x the depth component's that it carries at z_ref (camera rotation the identity, so the
+    optical axes are the base axes), and the result file says so.
+    """
+    floor = variance.Floor({'camera_x_range': 1e-10, 'camera_z_range': 2e-10})
+    z_ref = variance.effects.CAMERA_REFERENCE_RANGE
+    meas = idf.Measurements(np.zeros((2, 3)), np.array([[0, 0, -z_ref], [0, 0, -2 * z_ref]]),
+                            np.zeros(3), np.zeros((2, 3, 3)))
+    added = np.diagonal(floor.widen(meas, np.eye(3)).cov_Pi, axis1=1, axis2=2)[:, [0, 2]]
+    np.testing.assert_allclose(added[1] / added[0], [4.0, 16.0])
+    written = floor.as_dict()
+    assert written['camera_x_range']['times'] == f'(z / {z_ref} m)^2'
+    assert written['camera_z_range']['times'] == f'(z / {z_ref} m)^4'
