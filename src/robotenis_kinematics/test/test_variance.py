@@ -1,7 +1,7 @@
 """The REML floor: its score and information are right, and it finds a floor the data carry."""
 import numpy as np
 import pytest
-from robotenis_kinematics import delta, description, synthetic, variance, workspace
+from robotenis_kinematics import delta, description, effects, synthetic, variance, workspace
 from robotenis_kinematics import identification as idf
 from scipy import stats
 import scipy.linalg
@@ -97,7 +97,7 @@ def test_the_range_components_grow_as_an_error_in_pixels_does():
     optical axes are the base axes), and the result file says so.
     """
     floor = variance.Floor({'camera_x_range': 1e-10, 'camera_z_range': 2e-10})
-    z_ref = variance.effects.CAMERA_REFERENCE_RANGE
+    z_ref = effects.CAMERA_REFERENCE_RANGE
     meas = idf.Measurements(np.zeros((2, 3)), np.array([[0, 0, -z_ref], [0, 0, -2 * z_ref]]),
                             np.zeros(3), np.zeros((2, 3, 3)))
     added = np.diagonal(floor.widen(meas, np.eye(3)).cov_Pi, axis1=1, axis2=2)[:, [0, 2]]
