@@ -55,12 +55,11 @@ class Floor:
         return replace(meas, sigma_Theta=sigma, cov_Pi=cov)
 
     def _camera_variances(self, meas, R):
-        grow = ranges(meas, R) / effects.CAMERA_REFERENCE_RANGE
+        grow = range_growth(meas, R)
         out = np.zeros((len(meas), 3))
         for a, axis in enumerate('xyz'):
             out[:, a] = (self.variances.get(f'camera_{axis}', 0.0)
-                         + grow ** (2 * RANGE_POWER[axis])
-                         * self.variances.get(f'camera_{axis}_range', 0.0))
+                         + grow[:, a] ** 2 * self.variances.get(f'camera_{axis}_range', 0.0))
         return out
 
     def as_dict(self):
@@ -85,6 +84,12 @@ def ranges(meas, R):
     return -(meas.Pi @ np.asarray(R))[:, 2]
 
 
+def range_growth(meas, R):
+    """Return (z / z_ref)^RANGE_POWER (K, 3): how each axis's range component's sd grows."""
+    z = ranges(meas, R) / effects.CAMERA_REFERENCE_RANGE
+    return z[:, None] ** np.array([RANGE_POWER[axis] for axis in 'xyz'])
+
+
 def _blocks(model, meas, names, components):
     """
     Return the linearised problem at ``model``: V0 (K, 3, 3), B (K, T, 3), S (T, n), r, J.
@@ -101,7 +106,7 @@ def _blocks(model, meas, names, components):
     r = idf.constraints(model, meas)
     R = model.desc.camera_rotation
     A = np.einsum('kij,ja->kai', parts['P'], R)            # dGamma / d(optical axis a)
-    grow = ranges(meas, R) / effects.CAMERA_REFERENCE_RANGE
+    grow = range_growth(meas, R)
     vectors, owner = [], []
     for j, name in enumerate(components):
         if name == 'resolver':
@@ -109,9 +114,8 @@ def _blocks(model, meas, names, components):
                 vectors.append(parts['theta'] * np.eye(3)[i])
                 owner.append(j)
         else:
-            axis = name[len('camera_')]
-            scale = grow[:, None] ** RANGE_POWER[axis] if name.endswith('_range') else 1.0
-            vectors.append(A[:, 'xyz'.index(axis)] * scale)
+            a = 'xyz'.index(name[len('camera_')])
+            vectors.append(A[:, a] * (grow[:, a, None] if name.endswith('_range') else 1.0))
             owner.append(j)
     S = np.zeros((len(owner), len(components)))
     S[np.arange(len(owner)), owner] = 1.0
