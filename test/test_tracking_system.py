@@ -65,8 +65,8 @@ def runs():
 
 def test_the_ball_stays_in_the_image_and_detected(runs):
     on, _, _, _ = runs
-    assert on.frames >= 0.9 * TRACKING_S * 120.0, \
-        'frames missing: the camera did not render at 120 Hz'
+    assert on.frames >= 0.9 * TRACKING_S * 120.0, (
+        f'frames missing: {on.frames} ball truths in {TRACKING_S} s, against 120 a second')
     assert on.detected > 0.95, f'only {100 * on.detected:.1f} % of the frames detected'
     assert np.max(on.true) < IMAGE_HALF_HEIGHT / 3
 
