@@ -166,8 +166,9 @@ def _rays():
 def gradients(image, sigma=0.7):
     """Return the image's gradient (gx, gy), grey levels per px, smoothed by sigma px (float32)."""
     smooth = cv2.GaussianBlur(image, (0, 0), sigma)
-    return (cv2.Sobel(smooth, cv2.CV_32F, 1, 0, ksize=3) / 8,
-            cv2.Sobel(smooth, cv2.CV_32F, 0, 1, ksize=3) / 8)
+    # the 3x3 Sobel weighs a slope of 1 as 8; scaled inside, no array is made twice
+    return (cv2.Sobel(smooth, cv2.CV_32F, 1, 0, ksize=3, scale=0.125),
+            cv2.Sobel(smooth, cv2.CV_32F, 0, 1, ksize=3, scale=0.125))
 
 
 def steep(image, factor=1.0):
