@@ -233,7 +233,8 @@ def summarise(name, tallies):
 def figures(t):
     """Compute the bias, precision, NEES and error figures of a Tally."""
     depth_b, lat_b, prec, own, nees, dof, err3 = [], [], [], [], 0.0, 0, []
-    for c, frames in t.scenes.values():
+    nees_by_scene = {}
+    for key, (c, frames) in t.scenes.items():
         d = np.linalg.norm(c)
         E = np.array([f[0] for f in frames])
         err3.extend(np.linalg.norm(E, axis=1) / d * 1e3)
@@ -256,7 +257,9 @@ def figures(t):
                 prec.append(sd / np.mean(bounds))
             own.append(sd / pred_along)
             dev = E - E.mean(axis=0)
-            nees += float(np.einsum('ni,ij,nj->', dev, np.linalg.pinv(P), dev))
+            nees_by_scene[key] = (float(np.einsum('ni,ij,nj->', dev, np.linalg.pinv(P), dev)),
+                                  3 * (n - 1))
+            nees += nees_by_scene[key][0]
             dof += 3 * (n - 1)
         else:
             depth_b.append(max(along[0] ** 2 - pred_along ** 2, 0.0) / d ** 2)
@@ -274,7 +277,8 @@ def figures(t):
             'depth_bias_median': 100 * np.sqrt(np.median(depth_b)) if depth_b else np.nan,
             'depth_bias_within': (int(np.sum(np.sqrt(depth_b) <= TARGET_DEPTH_BIAS / 100)),
                                   len(depth_b)),
-            'depth_bias_by_scene': dict(zip(t.scenes, np.sqrt(depth_b)))}
+            'depth_bias_by_scene': dict(zip(t.scenes, np.sqrt(depth_b))),
+            'nees_by_scene': nees_by_scene}
 
 
 def project_renderer(scenes):
@@ -380,6 +384,28 @@ def bias_carriers(name, f, scenes, most=3):
     print(f'   {name}: model depth bias, the {most} largest scenes: '
           + '; '.join(f'{k} {100 * by_scene[k]:.2f} % ({describe(scene[k])})' for k in worst)
           + f'; RMS over the other {len(rest)}: {100 * np.sqrt(np.mean(np.square(rest))):.3f} %')
+
+
+def nees_carriers(name, f, scenes, most=2):
+    """
+    Print the scenes whose frames carry most of the model's NEES, and the NEES of the others.
+
+    The NEES sums every frame's; a scene whose fit lands on another outline in one frame of six
+    (far beyond the covariance the fit states) can put the sum out of its band alone, while the
+    covariances of the other scenes are right: the two call for different work.
+    """
+    by_scene = f['model']['nees_by_scene']
+    if not by_scene:
+        return
+    worst = sorted(by_scene, key=lambda k: -by_scene[k][0])[:most]
+    rest = [v for k, v in by_scene.items() if k not in worst]
+    scene = {s['id']: s for s in scenes}
+    nees, dof = sum(v[0] for v in rest), sum(v[1] for v in rest)
+    band = chi2.ppf([0.005, 0.995], dof) if dof else (np.nan, np.nan)
+    print(f'   {name}: model NEES, the {most} largest scenes: '
+          + '; '.join(f'{k} {by_scene[k][0]:.0f} over {by_scene[k][1]} dof '
+                      f'({describe(scene[k])})' for k in worst)
+          + f'; the other {len(rest)}: {nees:.0f} in ({band[0]:.0f}, {band[1]:.0f})')
 
 
 def verdicts(name, f):
@@ -714,8 +740,10 @@ def main(argv=None):
     if not args.project_only:
         verdicts('Mitsuba', mitsuba_figures)
     bias_carriers('project renderer', project, scenes)
+    nees_carriers('project renderer', project, scenes)
     if not args.project_only:
         bias_carriers('Mitsuba', mitsuba_figures, scenes)
+        nees_carriers('Mitsuba', mitsuba_figures, scenes)
     rows = speed(scenes)
     speed_verdicts(rows)
     render_speed()
