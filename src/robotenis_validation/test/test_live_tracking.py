@@ -44,3 +44,15 @@ def test_a_wider_gap_is_not_scored():
     p.balls = [(s, np.array([0.0, 0.0, 1.0])) for s in t]
     window = p.window(t[0], t[-1] + 1e-6)
     assert window.frames == 5 and len(window.true) == 2
+
+
+def test_the_loop_is_not_ready_before_the_probe_receives_a_ball_truth():
+    """Every node in the graph is not enough: the probe's own ball truths must be arriving."""
+    live = object.__new__(live_tracking.LiveTracking)
+    live.node = SimpleNamespace(count_publishers=lambda topic: 1,
+                                count_subscribers=lambda topic: 2)
+    live.probe = probe(missing=())
+    live.probe.now = 0.4
+    assert not live.loop_ready()
+    live.probe.balls.append((0.4, np.array([0.0, 0.0, 1.0])))
+    assert live.loop_ready()
