@@ -232,8 +232,7 @@ def summarise(name, tallies):
 
 def figures(t):
     """Compute the bias, precision, NEES and error figures of a Tally."""
-    depth_b, lat_b, prec, own, nees, dof, err3 = [], [], [], [], 0.0, 0, []
-    nees_by_scene = {}
+    depth_b, lat_b, prec, own, err3, nees_by_scene = [], [], [], [], [], {}
     for key, (c, frames) in t.scenes.items():
         d = np.linalg.norm(c)
         E = np.array([f[0] for f in frames])
@@ -259,14 +258,12 @@ def figures(t):
             dev = E - E.mean(axis=0)
             nees_by_scene[key] = (float(np.einsum('ni,ij,nj->', dev, np.linalg.pinv(P), dev)),
                                   3 * (n - 1))
-            nees += nees_by_scene[key][0]
-            dof += 3 * (n - 1)
         else:
             depth_b.append(max(along[0] ** 2 - pred_along ** 2, 0.0) / d ** 2)
             lat_b.append(max(np.sum(across[0] ** 2) - (np.trace(P) - pred_along ** 2), 0.0)
                          / d ** 2)
     err3 = np.array(err3) if err3 else np.array([np.nan])
-    band = chi2.ppf([0.005, 0.995], dof) if dof else (np.nan, np.nan)
+    nees, dof, band = nees_sum(nees_by_scene.values())
     return {'depth_bias': 100 * np.sqrt(np.mean(depth_b)) if depth_b else np.nan,
             'lateral_bias': 100 * np.sqrt(np.mean(lat_b)) if lat_b else np.nan,
             'precision': np.median(prec) if prec else np.nan,
@@ -386,6 +383,13 @@ def bias_carriers(name, f, scenes, most=3):
           + f'; RMS over the other {len(rest)}: {100 * np.sqrt(np.mean(np.square(rest))):.3f} %')
 
 
+def nees_sum(parts):
+    """Return the NEES and degrees of freedom summed over (nees, dof) parts; their 99 % band."""
+    parts = list(parts)
+    nees, dof = sum(p[0] for p in parts), sum(p[1] for p in parts)
+    return nees, dof, chi2.ppf([0.005, 0.995], dof) if dof else (np.nan, np.nan)
+
+
 def nees_carriers(name, f, scenes, most=2):
     """
     Print the scenes whose frames carry most of the model's NEES, and the NEES of the others.
@@ -400,8 +404,7 @@ def nees_carriers(name, f, scenes, most=2):
     worst = sorted(by_scene, key=lambda k: -by_scene[k][0])[:most]
     rest = [v for k, v in by_scene.items() if k not in worst]
     scene = {s['id']: s for s in scenes}
-    nees, dof = sum(v[0] for v in rest), sum(v[1] for v in rest)
-    band = chi2.ppf([0.005, 0.995], dof) if dof else (np.nan, np.nan)
+    nees, _, band = nees_sum(rest)
     print(f'   {name}: model NEES, the {most} largest scenes: '
           + '; '.join(f'{k} {by_scene[k][0]:.0f} over {by_scene[k][1]} dof '
                       f'({describe(scene[k])})' for k in worst)
